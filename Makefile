@@ -1,0 +1,45 @@
+# One install path for users, CI and the Docker image.
+#   make demo   - install if needed, run the built-in default scene (Example 1)
+#   make test   - install if needed, run the test suite (serial, then mpirun -n 2)
+# Installing: Debian packages (dolfinx 0.5.2 stack) with apt-get, then a virtual
+# environment made from Debian's interpreter with --system-site-packages, into
+# which pip installs the project and its pip-only dependencies.
+
+SHELL := /bin/bash
+PY := .venv/bin/python
+APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-venv python3-pip openmpi-bin
+export OMPI_ALLOW_RUN_AS_ROOT := 1
+export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
+export OMPI_MCA_rmaps_base_oversubscribe := 1
+MPIRUN := mpirun -n 2
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: install system-packages demo test test-serial test-mpi lint clean
+
+install: .venv/.installed
+
+system-packages:
+	@missing=""; for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:$$missing"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+.venv/.installed: pyproject.toml | system-packages
+	@[ -x $(PY) ] || /usr/bin/python3 -m venv --system-site-packages .venv
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e ".[dev]"
+	@touch $@
+
+demo: install
+	$(PY) -m solver run configs/example1.toml --output results/example1 --overwrite
+
+test: install
+	$(PY) -m pytest -q
+	$(MPIRUN) $(PY) -m pytest -q -m "not serial" -p no:cacheprovider
+
+lint: install
+	$(PY) -m ruff check solver tests
+
+clean:
+	rm -rf .venv results .pytest_cache

@@ -1,0 +1,5 @@
+"""``python -m solver``."""
+
+from .cli import main
+
+raise SystemExit(main())

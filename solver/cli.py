@@ -1,0 +1,164 @@
+"""Command line: ``python -m solver {run,check} ...``; works unchanged under mpirun.
+
+Bad input gives one line on stderr (rank 0 only) and exit code 2; a failed
+solve exits 1 with the step, time and reason; results are never overwritten
+without ``--overwrite``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from mpi4py import MPI
+
+from . import __version__
+from .config import ConfigError, load
+
+log = logging.getLogger("solver")
+
+
+class UsageError(Exception):
+    """A mistake of the user's (exit code 2)."""
+
+
+def _setup_logging(comm: MPI.Comm, verbose: bool) -> None:
+    """Our messages on rank 0 only; the form compiler's build chatter only with --verbose."""
+    log.handlers.clear()
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log.addHandler(handler)
+    log.propagate = False
+    log.setLevel(logging.INFO if comm.rank == 0 else logging.ERROR)
+    import ffcx  # noqa: F401  (calls logging.basicConfig() on import)
+
+    # the JIT's distutils resets the root level to INFO at every compile: filter at the handler
+    for h in logging.getLogger().handlers:
+        h.setLevel(logging.DEBUG if verbose else logging.WARNING)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="solver", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"solver {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run a scene and write its results")
+    r.add_argument("config", help="scene file (TOML)")
+    r.add_argument("--output", "-o", help="results directory (default: the scene's output.directory)")
+    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a scene value, e.g. --set mesh.nx=64 --set time.k=0.002 (repeatable)")
+    r.add_argument("--overwrite", action="store_true", help="replace earlier results in the output directory")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--verbose", "-v", action="store_true")
+
+    c = sub.add_parser("check", help="validate a scene without running it")
+    c.add_argument("config")
+    c.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    return p
+
+
+RESULT_FILES = ("solution.xdmf", "solution.h5", "timeseries.csv", "config.toml")
+
+
+def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool) -> None:
+    problem = None
+    if comm.rank == 0:
+        if outdir.exists() and not outdir.is_dir():
+            problem = f"--output {outdir}: exists and is not a directory"
+        elif outdir.is_dir():
+            existing = [f for f in RESULT_FILES if (outdir / f).exists()]
+            if existing and not overwrite:
+                problem = (f"--output {outdir}: holds earlier results ({', '.join(existing)}); "
+                           "pass --overwrite to replace them or choose another directory")
+            elif existing:
+                for f in existing:
+                    (outdir / f).unlink()
+        if problem is None:
+            outdir.mkdir(parents=True, exist_ok=True)
+    problem = comm.bcast(problem, root=0)
+    if problem:
+        raise UsageError(problem)
+
+
+def _progress(comm: MPI.Comm, steps: int, enabled: bool):
+    if comm.rank != 0 or not enabled:
+        return None, lambda row: None
+    from tqdm import tqdm
+
+    # a live bar on a terminal; in logs (no TTY) a line every 10 % instead of redraws
+    tty = sys.stderr.isatty()
+    bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr,
+               mininterval=0.2 if tty else 0.0, miniters=None if tty else max(1, (steps + 1) // 10))
+
+    def update(row: dict) -> None:
+        bar.set_postfix_str(f"t={row['t']:.4g} newton={row['newton_iterations']} zeta_min={row['zeta_min']:.4f}", refresh=False)
+        bar.update(1)
+
+    return bar, update
+
+
+def cmd_check(args, comm: MPI.Comm) -> int:
+    from .geometry import build
+
+    cfg = load(args.config, args.overrides)
+    # building the geometry also checks boundary names and intervals against the mesh
+    build(comm, cfg.mesh, cfg.boundaries, 3 if cfg.material.model == "3d" else 2)
+    physics = ["elasticity"]
+    if cfg.contact:
+        physics.append("contact(" + ",".join(p.name for p in cfg.contact) + ")")
+    if cfg.memory.kernel != "none":
+        physics.append(f"memory({cfg.memory.kernel})")
+    if cfg.damage.enabled:
+        physics.append("damage")
+    log.info("%s: ok — %s, %d steps of k = %g", args.config, " + ".join(physics), cfg.time.steps, cfg.time.k)
+    return 0
+
+
+def cmd_run(args, comm: MPI.Comm) -> int:
+    import time
+
+    cfg = load(args.config, args.overrides)
+    outdir = Path(args.output or cfg.output.directory)
+    # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
+    from .stepper import build_model, run
+
+    model = build_model(cfg, comm)
+    _prepare_output(comm, outdir, args.overwrite)
+    log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
+             comm.size)
+    bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
+    start = time.perf_counter()
+    try:
+        _, rows = run(cfg, outdir, comm, on_step=update, model=model)
+    finally:
+        if bar is not None:
+            bar.close()
+    last = rows[-1]
+    log.info("done in %.1f s: t = %g, zeta_min = %.6g, contact force = %.6g", time.perf_counter() - start,
+             last["t"], last["zeta_min"], last["contact_force"])
+    log.info("results in %s (solution.xdmf for ParaView, timeseries.csv, config.toml)", outdir)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    comm = MPI.COMM_WORLD
+    args = _parser().parse_args(argv)
+    _setup_logging(comm, getattr(args, "verbose", False))
+    from .damage import DamageSolveError
+    from .mechanics import SolverError
+    from .stepper import NonFiniteError
+
+    try:
+        if args.command == "check":
+            return cmd_check(args, comm)
+        return cmd_run(args, comm)
+    except (ConfigError, UsageError) as exc:
+        if comm.rank == 0:
+            print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (SolverError, DamageSolveError, NonFiniteError) as exc:
+        if comm.rank == 0:
+            print(f"failed: {exc}", file=sys.stderr)
+        return 1

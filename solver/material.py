@@ -1,0 +1,39 @@
+"""Constitutive functions as pure UFL: elasticity A, truncation Phi_L, von Mises."""
+
+from __future__ import annotations
+
+import ufl
+
+
+def lame(E: float, nu: float, model: str) -> tuple[float, float]:
+    """(lambda, mu) of A for the model; plane stress uses lambda* = E nu / (1 - nu^2)."""
+    mu = E / (2.0 * (1.0 + nu))
+    if model == "plane_stress":
+        return E * nu / (1.0 - nu**2), mu
+    return E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), mu
+
+
+def strain(u) -> ufl.core.expr.Expr:
+    """Linearized strain eps(u)."""
+    return ufl.sym(ufl.grad(u))
+
+
+def elasticity(eps, E: float, nu: float, model: str) -> ufl.core.expr.Expr:
+    """A eps = lambda tr(eps) I + 2 mu eps."""
+    lam, mu = lame(E, nu, model)
+    d = eps.ufl_shape[0]
+    return lam * ufl.tr(eps) * ufl.Identity(d) + 2.0 * mu * eps
+
+
+def truncate(tau, L: float) -> ufl.core.expr.Expr:
+    """Componentwise truncation Phi_L(tau)_ij = max(-L, min(L, tau_ij))."""
+    n, m = tau.ufl_shape
+    return ufl.as_matrix([[ufl.max_value(-L, ufl.min_value(L, tau[i, j])) for j in range(m)] for i in range(n)])
+
+
+def von_mises(tau) -> ufl.core.expr.Expr:
+    """The paper's von Mises norm of a plane stress field (2-D); the usual one in 3-D."""
+    if tau.ufl_shape[0] == 2:
+        return ufl.sqrt(tau[0, 0] ** 2 + tau[1, 1] ** 2 - tau[0, 0] * tau[1, 1] + 3 * tau[0, 1] ** 2)
+    s = ufl.dev(tau)
+    return ufl.sqrt(1.5 * ufl.inner(s, s))

@@ -1,0 +1,184 @@
+"""The long-memory integral, kept at quadrature points.
+
+The scheme's memory sum (MODEL.md section 3) is a left-rectangle rule,
+
+    M_n = k sum_{m=0}^{n-1} g((n - m) k) H_m,    H_m = zeta_m Phi_L(A eps(u_m)),
+
+evaluated at the quadrature points of the displacement form. For a Prony
+kernel g(s) = sum_i c_i exp(-s / tau_i) (tau = inf: the constant kernel) it is
+the recursion M_n^i = exp(-k / tau_i) (M_{n-1}^i + k c_i H_{n-1}): no past is
+stored. Only a tabulated (general) kernel keeps every H_m.
+
+The history is committed once per step, after the step has converged.
+"""
+
+from __future__ import annotations
+
+import math
+
+import basix
+import numpy as np
+import ufl
+from dolfinx import fem
+
+from .config import MemoryConfig
+
+_BASIX_CELL = {"triangle": basix.CellType.triangle, "tetrahedron": basix.CellType.tetrahedron}
+
+
+class QuadratureRule:
+    """One quadrature rule for all quadrature-point data: points, ``dx`` and evaluation.
+
+    The points come from basix and match FFCx's "default" scheme of the same
+    degree, so functions in these spaces can be integrated with ``self.dx``.
+    """
+
+    def __init__(self, mesh, degree: int) -> None:
+        self.mesh = mesh
+        self.degree = degree
+        self.points, self.weights = basix.make_quadrature(_BASIX_CELL[mesh.ufl_cell().cellname()], degree)
+        self.dx = ufl.Measure(
+            "dx", domain=mesh, metadata={"quadrature_degree": degree, "quadrature_scheme": "default"}
+        )
+        imap = mesh.topology.index_map(mesh.topology.dim)
+        # local and ghost cells: every process holds consistent values without a scatter
+        self.cells = np.arange(imap.size_local + imap.num_ghosts, dtype=np.int32)
+
+    def space(self, shape: tuple[int, ...] = ()) -> fem.FunctionSpace:
+        cell = self.mesh.ufl_cell()
+        if shape == ():
+            el = ufl.FiniteElement("Quadrature", cell, self.degree, quad_scheme="default")
+        elif len(shape) == 1:
+            el = ufl.VectorElement("Quadrature", cell, self.degree, dim=shape[0], quad_scheme="default")
+        else:
+            el = ufl.TensorElement("Quadrature", cell, self.degree, shape=shape, quad_scheme="default")
+        return fem.FunctionSpace(self.mesh, el)
+
+    def evaluator(self, expr, space: fem.FunctionSpace) -> "QuadratureEvaluator":
+        return QuadratureEvaluator(self, expr, space)
+
+
+class QuadratureEvaluator:
+    """Evaluates a UFL expression at the rule's points into an array laid out like ``space``.
+
+    The expression is compiled once; the dof permutation is computed once.
+    """
+
+    def __init__(self, rule: QuadratureRule, expr, space: fem.FunctionSpace) -> None:
+        self.expression = fem.Expression(expr, rule.points)
+        self.cells = rule.cells
+        self.bs = space.dofmap.bs
+        npts = rule.points.shape[0]
+        dofs = space.dofmap.list.array.reshape(-1, npts)[: len(self.cells)]
+        self.dofs = dofs.ravel()
+        self.size = space.dofmap.index_map.size_local + space.dofmap.index_map.num_ghosts
+        self._values = np.zeros((len(self.cells), npts * self.bs), dtype=np.float64)
+        self._identity = np.array_equal(self.dofs, np.arange(len(self.dofs)))
+
+    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
+        """Evaluate into ``out`` (flat array of the space's layout) and return it."""
+        self.expression.eval(self.cells, self._values)
+        if out is None:
+            out = np.empty(self.size * self.bs)
+        if self._identity:
+            out[:] = self._values.reshape(-1)
+        else:
+            out.reshape(-1, self.bs)[self.dofs] = self._values.reshape(-1, self.bs)
+        return out
+
+
+class History:
+    """Base: the memory tensor M (a quadrature function) and its update after a step."""
+
+    M: fem.Function
+
+    def commit(self, n: int) -> None:
+        """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
+        raise NotImplementedError
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Arrays that define the history (for checkpoints)."""
+        raise NotImplementedError
+
+    def term(self, w) -> ufl.Form:
+        """(M, eps(w)) over the rule's dx: the memory contribution to the momentum residual."""
+        return ufl.inner(self.M, ufl.sym(ufl.grad(w))) * self.rule.dx
+
+
+class PronyHistory(History):
+    """Prony series (constant kernel: one term with tau = inf), updated recursively."""
+
+    def __init__(self, rule: QuadratureRule, source, weights, times, k: float) -> None:
+        self.rule = rule
+        d = rule.mesh.geometry.dim
+        Q = rule.space((d, d))
+        self.M = fem.Function(Q, name="memory")
+        self.H = rule.evaluator(source, Q)
+        self._h = np.zeros_like(self.M.x.array)
+        self.k = k
+        taus = list(times) if times else [math.inf] * len(weights)
+        self.weights = np.asarray(weights, dtype=float)
+        self.decay = np.array([math.exp(-k / t) if math.isfinite(t) else 1.0 for t in taus])
+        # one term: M itself is the term; several: one array per term
+        self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
+
+    def commit(self, n: int) -> None:
+        h = self.H(self._h)
+        if self.terms is None:
+            m = self.M.x.array
+            m += (self.k * self.weights[0]) * h
+            if self.decay[0] != 1.0:
+                m *= self.decay[0]
+            return
+        total = self.M.x.array
+        total[:] = 0.0
+        for term, c, e in zip(self.terms, self.weights, self.decay):
+            term += (self.k * c) * h
+            term *= e
+            total += term
+
+    def state(self) -> dict[str, np.ndarray]:
+        if self.terms is None:
+            return {"M": self.M.x.array}
+        return {f"M{i}": t for i, t in enumerate(self.terms)}
+
+
+class TabulatedHistory(History):
+    """A general kernel g(s) given as a table: the full past H_0..H_{n} is kept."""
+
+    def __init__(self, rule: QuadratureRule, source, table, k: float, steps: int) -> None:
+        self.rule = rule
+        d = rule.mesh.geometry.dim
+        Q = rule.space((d, d))
+        self.M = fem.Function(Q, name="memory")
+        self.H = rule.evaluator(source, Q)
+        self.k = k
+        self.past = np.zeros((steps + 1, self.M.x.array.size))
+        s = np.array([r[0] for r in table])
+        g = np.array([r[1] for r in table])
+        # g((n - m) k) for lags 1..steps+1; beyond the table, the last value holds
+        self.g = np.interp(k * np.arange(0, steps + 2), s, g)
+
+    def commit(self, n: int) -> None:
+        self.H(self.past[n])
+        lags = self.g[n + 1 - np.arange(n + 1)]  # g((n+1-m) k), m = 0..n
+        self.M.x.array[:] = self.k * (lags @ self.past[: n + 1])
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {"past": self.past}
+
+
+def memory_source(u, zeta, A, L: float):
+    """H = zeta Phi_L(A eps(u)): what the kernel integrates."""
+    from .material import strain, truncate
+
+    return zeta * truncate(A(strain(u)), L)
+
+
+def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, steps: int) -> History | None:
+    """The cheapest exact history for the kernel: None, a recursion, or the full past."""
+    if cfg.kernel == "none":
+        return None
+    if cfg.kernel in ("constant", "exponential"):
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k)
+    return TabulatedHistory(rule, source, cfg.table, k, steps)

@@ -1,0 +1,204 @@
+"""The time loop of Problem VP^hk (MODEL.md section 3).
+
+Per level n >= 1, with only data of level n-1 on the right-hand sides:
+  1. damage: zeta_{n-1} -> zeta_n (uses u_{n-1}, zeta_{n-1});
+  2. displacement: u_n with the memory M_n (formed at the end of step n-1);
+  3. output of level n (sigma_n = A eps(u_n) + M_n);
+  4. commit: M_{n+1} from (u_n, zeta_n) -- only after the step converged.
+Level 0 is the elastic contact problem with M_0 = 0 and zeta_0 = zeta0.
+
+The scene decides what is built: no damage solve without damage, no history
+without memory, no contact term without a contact part.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .config import Config, dumps
+from .damage import Damage
+from .geometry import Geometry, build
+from .io import CellAverage, CSVWriter, XDMFWriter, von_mises_array, write_text_atomic
+from .material import elasticity, strain
+from .mechanics import Mechanics
+from .memory import QuadratureRule, make_history, memory_source
+
+
+class NonFiniteError(RuntimeError):
+    """A field became NaN or inf."""
+
+
+@dataclass
+class Model:
+    """Everything one scene builds: geometry, fields and the physics it switches on."""
+
+    cfg: Config
+    geo: Geometry
+    u: fem.Function
+    zeta: fem.Function | fem.Constant
+    damage: Damage | None
+    history: object | None
+    rule: QuadratureRule
+    mech: Mechanics
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.geo.comm
+
+
+def build_model(cfg: Config, comm: MPI.Comm) -> Model:
+    """Mesh, spaces and the physics terms the scene switches on."""
+    gdim = 3 if cfg.material.model == "3d" else 2
+    geo = build(comm, cfg.mesh, cfg.boundaries, gdim)
+    mesh = geo.mesh
+    V = fem.VectorFunctionSpace(mesh, ("CG", 1))
+    u = fem.Function(V, name="displacement")
+    k, steps = cfg.time.k, cfg.time.steps
+    damage = None
+    if cfg.damage.enabled:
+        Z = fem.FunctionSpace(mesh, ("CG", 1))
+        damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options)
+        zeta = damage.zeta
+    else:
+        zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
+    rule = QuadratureRule(mesh, cfg.solver.quadrature_degree)
+    mat = cfg.material
+
+    def A(eps):
+        return elasticity(eps, mat.E, mat.nu, mat.model)
+
+    history = make_history(cfg.memory, rule, memory_source(u, zeta, A, cfg.memory.L), k, steps)
+    mech = Mechanics(geo, cfg, u, history)
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech)
+
+
+class Outputs:
+    """The fields written to XDMF and the diagnostics of each level."""
+
+    def __init__(self, model: Model, outdir: Path | None) -> None:
+        self.model = model
+        mesh = model.geo.mesh
+        d = mesh.geometry.dim
+        T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
+        self.stress = fem.Function(T0, name="stress")
+        self.elastic_stress = fem.Function(T0, name="elastic_stress")
+        self.von_mises = fem.Function(fem.FunctionSpace(mesh, ("DG", 0)), name="von_mises")
+        mat = model.cfg.material
+        sig_el = elasticity(strain(model.u), mat.E, mat.nu, mat.model)
+        sig = sig_el + model.history.M if model.history is not None else sig_el
+        self.avg_el = CellAverage(sig_el, self.elastic_stress, model.rule.dx)
+        self.avg = CellAverage(sig, self.stress, model.rule.dx)
+        self.d = d
+        Z = model.damage.zeta if model.damage is not None else None
+        self.zeta_norm_form = fem.form(model.zeta * model.zeta * ufl.dx)
+        self.zeta = Z
+        self.xdmf = None
+        if outdir is not None and model.cfg.output.xdmf:
+            funcs = [model.u] + ([Z] if Z is not None else []) + [self.stress, self.elastic_stress, self.von_mises]
+            self.xdmf = XDMFWriter(outdir / "solution.xdmf", mesh, funcs)
+
+    def update_cell_fields(self) -> None:
+        self.avg_el.update()
+        self.avg.update()
+        n = self.von_mises.function_space.dofmap.index_map.size_local
+        s = self.stress.x.array[: n * self.d * self.d]
+        self.von_mises.x.array[:n] = von_mises_array(s, self.d)
+        self.von_mises.x.scatter_forward()
+
+    def zeta_range(self) -> tuple[float, float]:
+        comm = self.model.comm
+        if self.zeta is None:
+            z0 = self.model.cfg.damage.zeta0
+            return z0, z0
+        n = self.zeta.function_space.dofmap.index_map.size_local
+        a = self.zeta.x.array[:n]
+        return (comm.allreduce(float(a.min()) if n else np.inf, op=MPI.MIN),
+                comm.allreduce(float(a.max()) if n else -np.inf, op=MPI.MAX))
+
+    def zeta_norm(self) -> float:
+        return float(np.sqrt(self.model.comm.allreduce(fem.assemble_scalar(self.zeta_norm_form), op=MPI.SUM)))
+
+    def close(self) -> None:
+        if self.xdmf is not None:
+            self.xdmf.close()
+
+
+def _check_finite(model: Model, n: int, t: float) -> None:
+    bad = []
+    if not np.all(np.isfinite(model.u.x.array)):
+        bad.append("displacement")
+    if model.damage is not None and not np.all(np.isfinite(model.damage.zeta.x.array)):
+        bad.append("damage")
+    if model.history is not None and not np.all(np.isfinite(model.history.M.x.array)):
+        bad.append("memory")
+    bad = model.comm.allreduce(bad, op=MPI.SUM)
+    if bad:
+        raise NonFiniteError(f"step {n}, t = {t:.6g}: non-finite values in {', '.join(sorted(set(bad)))}")
+
+
+def writes_level(n: int, steps: int, every: int) -> bool:
+    """Whether level n is written: every N-th level and the last; every=0: first and last."""
+    if n == 0 or n == steps:
+        return True
+    return every > 0 and n % every == 0
+
+
+def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
+        on_step: Callable[[dict], None] | None = None, model: Model | None = None) -> tuple[Model, list[dict]]:
+    """Run the scene; write results to ``outdir`` (None: nothing written). Returns the model and the rows."""
+    model = model or build_model(cfg, comm)
+    if outdir is not None and comm.rank == 0:
+        write_text_atomic(outdir / "config.toml", dumps(cfg))
+    out = Outputs(model, outdir)
+    csv = CSVWriter(outdir / "timeseries.csv", comm) if outdir is not None else None
+    steps, k = cfg.time.steps, cfg.time.k
+    rows: list[dict] = []
+    try:
+        for n in range(steps + 1):
+            t = n * k
+            t0 = time.perf_counter()
+            clipped = 0
+            if n > 0 and model.damage is not None:
+                clipped = model.damage.step().clipped
+            t1 = time.perf_counter()
+            info = model.mech.solve(t)
+            _check_finite(model, n, t)
+            t2 = time.perf_counter()
+            zmin, zmax = out.zeta_range()
+            row = {
+                "step": n, "t": t, "newton_iterations": info.iterations, "factorizations": info.factorizations,
+                "residual": info.residual, "contact_force": model.mech.contact_force(),
+                "contact_length": model.mech.contact_length(), "zeta_min": zmin, "zeta_max": zmax,
+                "zeta_clipped": clipped, "strain_norm": model.mech.strain_norm(), "zeta_norm": out.zeta_norm(),
+            }
+            t3 = time.perf_counter()
+            if writes_level(n, steps, cfg.output.every) and out.xdmf is not None:
+                out.update_cell_fields()
+                out.xdmf.write(t)
+            t4 = time.perf_counter()
+            if model.history is not None and n < steps:
+                model.history.commit(n)
+            t5 = time.perf_counter()
+            row.update({
+                "time_damage": t1 - t0, "time_displacement": t2 - t1, "time_output": (t4 - t3) + (t3 - t2),
+                "time_memory": t5 - t4, "wall_time": t5 - t0,
+            })
+            rows.append(row)
+            if csv is not None:
+                csv.write(row)
+            if on_step is not None:
+                on_step(row)
+    finally:
+        out.close()
+        if csv is not None:
+            csv.close()
+    return model, rows
