@@ -1,0 +1,64 @@
+# Container image of the solver (dolfinx 0.5.2 from Debian bookworm).
+#
+# It installs through the Makefile, the project's one install path: the Debian
+# packages with `make system-packages` (as root), then the virtual environment
+# with `make install` as the non-root user `solver`, who owns /opt/solver/.venv.
+#
+# Build:
+#   docker build -t campo-solver .
+# Run a scene (the entrypoint is `python -m solver`; results go to a mounted folder):
+#   mkdir -p out && docker run --rm -v "$PWD/out:/out" campo-solver run configs/example2.toml --output /out/ex2
+#   docker run --rm campo-solver check configs/example1.toml
+# Run in parallel (MPI, 2 processes): replace the entrypoint with mpirun
+#   docker run --rm -v "$PWD/out:/out" --entrypoint mpirun campo-solver \
+#       -n 2 python -m solver run configs/example1.toml --output /out/ex1
+# Own scenes: mount them too, e.g. -v "$PWD/scenes:/scenes" ... run /scenes/my.toml --output /out/my
+# The output folder must be writable by uid 1000 (or add --user "$(id -u):$(id -g)";
+# another uid then recompiles the forms into its own cache, since HOME stays /home/solver).
+# Tests inside the image:
+#   docker run --rm --entrypoint python campo-solver -m pytest -q -m "not slow"
+#
+# scripts/check-image.sh replays this file's RUN lines in a debootstrapped
+# bookworm chroot (no Docker needed); it understands FROM, ARG, ENV, WORKDIR,
+# USER, COPY [--chown=...], RUN (shell form), ENTRYPOINT (exec form), CMD, LABEL.
+FROM debian:bookworm
+
+ARG DEBIAN_FRONTEND=noninteractive
+
+# make runs the Makefile; ca-certificates lets pip reach PyPI over https
+RUN apt-get update -qq \
+ && apt-get install -y -qq --no-install-recommends make ca-certificates \
+ && rm -rf /var/lib/apt/lists/*
+
+WORKDIR /opt/solver
+
+# Debian packages first (a layer that only changes with the Makefile)
+COPY Makefile ./
+RUN make system-packages \
+ && rm -rf /var/lib/apt/lists/*
+
+RUN useradd --create-home --uid 1000 --user-group --shell /bin/bash solver \
+ && chown solver:solver /opt/solver
+
+COPY --chown=solver:solver . /opt/solver
+
+USER solver
+ENV HOME=/home/solver \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    PYTHONUNBUFFERED=1
+# the virtual environment /opt/solver/.venv, then the project in it (editable, with [dev] for pytest)
+RUN make install
+
+ENV PATH=/opt/solver/.venv/bin:$PATH \
+    OMPI_MCA_rmaps_base_oversubscribe=1 \
+    OMPI_MCA_btl_vader_single_copy_mechanism=none
+
+# Compile the forms of the default scene now (into /home/solver/.cache/fenics),
+# so a first run doesn't: two steps of Example 1 at its own time step k (the
+# damage form holds k, so another k compiles that form again on first use).
+RUN python -m solver run configs/example1.toml --set time.T=0.02 --output /tmp/precompile --no-progress \
+ && rm -rf /tmp/precompile
+
+ENTRYPOINT ["python", "-m", "solver"]
+CMD ["--help"]

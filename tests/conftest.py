@@ -1,0 +1,45 @@
+"""Shared fixtures. Tests run serially and under ``mpirun -n 2`` (those not marked serial)."""
+
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def comm() -> MPI.Comm:
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def shared_tmp(tmp_path_factory, comm) -> Path:
+    """A temporary directory made on rank 0 and shared by all ranks."""
+    path = str(tmp_path_factory.mktemp("run")) if comm.rank == 0 else None
+    return Path(comm.bcast(path, root=0))
+
+
+@pytest.fixture(autouse=True)
+def _collect(comm):
+    yield
+    gc.collect()
+    comm.barrier()
+
+
+def eval_point(expr, mesh, point=(1 / 3, 1 / 3)) -> np.ndarray:
+    """Value of a UFL expression at a reference point of local cell 0 (constant-data tests)."""
+    from dolfinx import fem
+
+    e = fem.Expression(expr, np.array([point]))
+    return e.eval(np.array([0], dtype=np.int32)).reshape(expr.ufl_shape)
+
+
+def unit_mesh(comm, n: int = 2):
+    from dolfinx import mesh
+
+    return mesh.create_unit_square(comm, n, n)

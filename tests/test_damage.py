@@ -1,0 +1,91 @@
+"""Damage source (eta, Psi, phi) against hand values and the damage step's invariants."""
+
+import numpy as np
+import pytest
+from conftest import eval_point, unit_mesh
+from dolfinx import fem
+from mpi4py import MPI
+
+from solver.config import DamageConfig
+from solver.damage import Damage, eta, psi, source
+
+
+def phi_hand(eps, z, c: DamageConfig) -> float:
+    e = z if z > c.zeta_star else c.zeta_star
+    q = min(float(np.sum(eps * eps)), c.q_star)
+    return -c.lambda1 * (1 - e) / e - max(0.5 * c.lambda2 * q - c.lambda3, 0.0)
+
+
+@pytest.mark.parametrize("z", [1.0, 0.5, 0.02, 0.01, 0.005])
+@pytest.mark.parametrize("scale", [0.0, 0.1, 2.0])
+def test_source_hand_values(comm, z, scale):
+    m = unit_mesh(comm)
+    c = DamageConfig(lambda3=0.3)
+    eps = scale * np.array([[0.3, 0.1], [0.1, -0.2]])
+    got = eval_point(source(fem.Constant(m, eps), fem.Constant(m, z), c), m)
+    assert float(got) == pytest.approx(phi_hand(eps, z, c), rel=1e-13, abs=1e-15)
+
+
+def test_eta_and_psi(comm):
+    m = unit_mesh(comm)
+    assert float(eval_point(eta(fem.Constant(m, 0.3), 0.01), m)) == 0.3
+    assert float(eval_point(eta(fem.Constant(m, 0.001), 0.01), m)) == 0.01
+    eps = np.array([[1.0, 2.0], [2.0, 3.0]])  # eps.eps = 18
+    assert float(eval_point(psi(fem.Constant(m, eps), 20.0), m)) == pytest.approx(18.0)
+    assert float(eval_point(psi(fem.Constant(m, eps), 1.0), m)) == 1.0
+
+
+def _damage(comm, cfg, k=0.1, n=6):
+    m = unit_mesh(comm, n)
+    u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
+    return Damage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2), u
+
+
+def _integral(d):
+    return d.V.mesh.comm.allreduce(fem.assemble_scalar(fem.form(d.zeta * __import__("ufl").dx)), op=MPI.SUM)
+
+
+def test_zero_source_keeps_uniform_and_conserves(comm):
+    cfg = DamageConfig(lambda1=0.0, lambda2=0.0, lambda3=0.0, zeta0=0.7)
+    d, _ = _damage(comm, cfg)
+    before = _integral(d)
+    for _ in range(5):
+        d.step()
+    assert np.allclose(d.zeta.x.array, 0.7, rtol=0, atol=1e-13)
+    assert _integral(d) == pytest.approx(before, rel=1e-13)
+
+
+def test_nonuniform_zero_source_conserves_and_smooths(comm):
+    cfg = DamageConfig(lambda1=0.0, lambda2=0.0, lambda3=0.0, kappa=0.1, clip=False)
+    d, _ = _damage(comm, cfg)
+    d.zeta.interpolate(lambda x: 0.5 + 0.4 * np.cos(np.pi * x[0]))
+    before = _integral(d)
+    spread0 = comm.allreduce(np.ptp(d.zeta.x.array), op=MPI.MAX)
+    for _ in range(5):
+        d.step()
+    assert _integral(d) == pytest.approx(before, rel=1e-12)
+    assert comm.allreduce(np.ptp(d.zeta.x.array), op=MPI.MAX) < spread0
+
+
+def test_uniform_source_is_forward_euler(comm):
+    """With eps = 0 the source depends on zeta only: a uniform zeta follows forward Euler exactly."""
+    cfg = DamageConfig(lambda1=0.5, zeta0=0.9, clip=False)
+    k = 0.1
+    d, _ = _damage(comm, cfg, k=k)
+    z = 0.9
+    for _ in range(4):
+        info = d.step()
+        e = max(z, cfg.zeta_star)
+        z = z + k * (-cfg.lambda1 * (1 - e) / e)
+        assert np.allclose(d.zeta.x.array, z, atol=1e-13)
+        assert info.clipped == 0
+
+
+def test_clipping_counts_and_bounds(comm):
+    cfg = DamageConfig(lambda1=5.0, zeta0=0.05, clip=True)
+    d, _ = _damage(comm, cfg, k=0.1)
+    info = d.step()  # 0.05 - 0.1 * 5 * 0.95 / 0.05 < zeta*: every node clipped
+    nglobal = d.V.dofmap.index_map.size_global
+    assert info.clipped == nglobal
+    assert info.raw_min < cfg.zeta_star
+    assert np.all(d.zeta.x.array >= cfg.zeta_star)

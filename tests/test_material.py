@@ -1,0 +1,55 @@
+"""Constitutive functions against hand values: A (plane stress/strain), Phi_L, von Mises."""
+
+import numpy as np
+import pytest
+import ufl
+from conftest import eval_point, unit_mesh
+from dolfinx import fem
+
+from solver.io import von_mises_array
+from solver.material import elasticity, lame, truncate, von_mises
+
+
+def test_plane_stress_matches_paper_formula(comm):
+    m = unit_mesh(comm)
+    E, r = 100.0, 0.3
+    tau = np.array([[0.01, 0.02], [0.02, -0.03]])
+    got = eval_point(elasticity(fem.Constant(m, tau), E, r, "plane_stress"), m)
+    # (A tau)_ab = E r / (1 - r^2) (tau11 + tau22) delta_ab + E / (1 + r) tau_ab
+    want = E * r / (1 - r**2) * np.trace(tau) * np.eye(2) + E / (1 + r) * tau
+    assert np.allclose(got, want, rtol=1e-14, atol=1e-14)
+
+
+def test_plane_strain_lame():
+    lam, mu = lame(210.0, 0.25, "plane_strain")
+    assert lam == pytest.approx(210 * 0.25 / (1.25 * 0.5))
+    assert mu == pytest.approx(210 / 2.5)
+
+
+def test_truncation_componentwise(comm):
+    m = unit_mesh(comm)
+    tau = np.array([[1500.0, -2000.0], [3.0, -999.0]])
+    got = eval_point(truncate(fem.Constant(m, tau), 1000.0), m)
+    assert np.array_equal(got, np.array([[1000.0, -1000.0], [3.0, -999.0]]))
+
+
+def test_von_mises_hand_value(comm):
+    m = unit_mesh(comm)
+    tau = np.array([[3.0, 1.0], [1.0, -2.0]])
+    want = np.sqrt(9 + 4 + 6 + 3)  # t11^2 + t22^2 - t11 t22 + 3 t12^2
+    assert eval_point(von_mises(fem.Constant(m, tau)), m) == pytest.approx(want, rel=1e-14)
+    assert von_mises_array(tau.ravel(), 2)[0] == pytest.approx(want, rel=1e-14)
+
+
+def test_von_mises_3d_uniaxial():
+    s = np.diag([7.0, 0.0, 0.0]).ravel()
+    assert von_mises_array(s, 3)[0] == pytest.approx(7.0, rel=1e-14)
+
+
+def test_strain_of_linear_field_is_exact(comm):
+    m = unit_mesh(comm)
+    V = fem.VectorFunctionSpace(m, ("CG", 1))
+    u = fem.Function(V)
+    u.interpolate(lambda x: np.vstack([2 * x[0] + 3 * x[1], -x[0] + 5 * x[1]]))
+    got = eval_point(ufl.sym(ufl.grad(u)), m)
+    assert np.allclose(got, [[2.0, 1.0], [1.0, 5.0]], atol=1e-13)

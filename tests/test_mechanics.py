@@ -1,0 +1,83 @@
+"""The displacement problem against closed forms: a patch test (with memory) and a block
+pressed by a deformable foundation (normal compliance)."""
+
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from solver.config import from_dict
+from solver.stepper import build_model, run
+
+
+def _x_stretch_scene(memory: dict, T=0.5, k=0.1, t=10.0, L=1000.0):
+    # nu = 0: uniaxial stress, clamping the left side does not constrain lateral contraction
+    return from_dict({
+        "mesh": {"nx": 4, "ny": 3, "corners": [[0, 0], [2, 1]]},
+        "boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [t, 0.0]}},
+        "material": {"E": 100.0, "nu": 0.0},
+        "memory": {**memory, "L": L},
+        "damage": {"enabled": False, "zeta0": 0.8},
+        "time": {"T": T, "k": k},
+    })
+
+
+def _tip_strain(model) -> float:
+    """u_x / x at the right side: the uniform strain eps_xx."""
+    x = model.u.function_space.tabulate_dof_coordinates()
+    u = model.u.x.array.reshape(-1, 2)
+    sel = np.isclose(x[:, 0], 2.0)
+    vals = u[sel, 0] / 2.0
+    vmax = model.comm.allreduce(vals.max() if vals.size else -np.inf, op=MPI.MAX)
+    vmin = model.comm.allreduce(vals.min() if vals.size else np.inf, op=MPI.MIN)
+    assert vmax - vmin < 1e-12
+    uy = model.comm.allreduce(np.abs(u[:, 1]).max(), op=MPI.MAX)
+    assert uy < 1e-12
+    return vmax
+
+
+@pytest.mark.parametrize("memory,g", [
+    ({"kernel": "none"}, None),
+    ({"kernel": "constant", "weights": [1.0]}, lambda s: 1.0),
+    ({"kernel": "exponential", "weights": [-1.0], "times": [1.0]}, lambda s: -math.exp(-s)),
+])
+@pytest.mark.parametrize("L", [1000.0, 6.0])
+def test_patch_with_memory(comm, memory, g, L):
+    """Uniform stress t: E eps_n + k sum_m g((n-m)k) zeta0 min(L, E eps_m) = t, solved exactly by P1."""
+    E, t, k, zeta0 = 100.0, 10.0, 0.1, 0.8
+    cfg = _x_stretch_scene(memory, k=k, t=t, L=L)
+    model = build_model(cfg, comm)
+    eps = []
+    for n in range(cfg.time.steps + 1):
+        model.mech.solve(n * k)
+        if model.history is not None:
+            model.history.commit(n)
+        mem = 0.0 if g is None else k * sum(g((n - m) * k) * zeta0 * min(L, E * eps[m]) for m in range(n))
+        want = (t - mem) / E
+        eps.append(want)
+        assert _tip_strain(model) == pytest.approx(want, rel=1e-10)
+
+
+@pytest.mark.parametrize("mu", [1e-2, 1e-4, 1e-10])
+def test_block_pressed_by_foundation(comm, mu):
+    """Clamped top, foundation overlapping the bottom by delta (gap g = -delta), nu = 0:
+    u_y = a (1 - y), a = delta / (1 + E mu); the contact force is E a."""
+    E, delta = 100.0, 1e-3
+    cfg = from_dict({
+        "mesh": {"nx": 3, "ny": 5},
+        "boundary": {"top": {"role": "clamped"}, "bottom": {"role": "contact", "gap": -delta, "mu": mu}},
+        "material": {"E": E, "nu": 0.0},
+        "memory": {"kernel": "none"},
+        "damage": {"enabled": False},
+        "time": {"T": 1.0, "k": 1.0},
+    })
+    model, rows = run(cfg, None, comm)
+    a = delta / (1 + E * mu)
+    x = model.u.function_space.tabulate_dof_coordinates()
+    u = model.u.x.array.reshape(-1, 2)
+    err = comm.allreduce(np.abs(u[:, 1] - a * (1 - x[:, 1])).max(), op=MPI.MAX)
+    assert err < 1e-9 * a
+    assert rows[-1]["contact_force"] == pytest.approx(E * a, rel=1e-6)
+    assert rows[-1]["contact_length"] == pytest.approx(1.0)
+    assert rows[0]["newton_iterations"] <= 3
