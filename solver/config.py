@@ -523,9 +523,7 @@ def _gmsh_dim(path: str) -> int:
     """Geometric dimension of a .msh file: 3 if any node has z != 0."""
     import gmsh  # local import: only gmsh scenes pay for it
 
-    initialized = gmsh.isInitialized()
-    if not initialized:
-        gmsh.initialize()
+    gmsh.initialize()  # gmsh 4.8 (Debian bookworm) has no isInitialized(): own the session here
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("dimension-probe")
@@ -536,8 +534,7 @@ def _gmsh_dim(path: str) -> int:
     except Exception as exc:  # gmsh raises plain Exception on unreadable files
         raise ConfigError(f"mesh.file = {path!r}: gmsh cannot read it ({exc})") from None
     finally:
-        if not initialized:
-            gmsh.finalize()
+        gmsh.finalize()
     return dim
 
 
@@ -640,6 +637,8 @@ def to_dict(cfg: Config) -> dict:
     m = dataclasses.asdict(cfg.mesh)
     if cfg.mesh.kind == "rectangle":
         m.pop("file")
+    else:
+        m = {"kind": "gmsh", "file": cfg.mesh.file}
     out["mesh"] = m
     out["boundary"] = {}
     for b in cfg.boundaries:

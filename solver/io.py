@@ -64,9 +64,17 @@ def von_mises_array(s: np.ndarray, dim: int) -> np.ndarray:
 
 
 class XDMFWriter:
-    """One XDMF file, mesh written once, functions appended per written level."""
+    """XDMF time series: dolfinx writes the data (HDF5, in parallel); the XML is then regrouped.
+
+    dolfinx 0.5.2 puts every function in its own temporal collection, which ParaView
+    loads as separate blocks and meshio not at all. After each written level rank 0
+    rewrites the XML (atomically) as one temporal collection whose grids carry every
+    field, so Warp By Vector and colouring by a cell field work on one dataset.
+    """
 
     def __init__(self, path: Path, mesh, functions: list[fem.Function]) -> None:
+        self.path = Path(path)
+        self.comm = mesh.comm
         self.file = io.XDMFFile(mesh.comm, str(path), "w")
         self.file.write_mesh(mesh)
         self.functions = functions
@@ -74,9 +82,48 @@ class XDMFWriter:
     def write(self, t: float) -> None:
         for f in self.functions:
             self.file.write_function(f, t)
+        self.comm.barrier()
+        if self.comm.rank == 0:
+            merge_xdmf(self.path)
 
     def close(self) -> None:
         self.file.close()
+        self.comm.barrier()
+        if self.comm.rank == 0:
+            merge_xdmf(self.path)
+
+
+def merge_xdmf(path: Path) -> None:
+    """Regroup dolfinx's per-function collections into one temporal collection (idempotent)."""
+    import xml.etree.ElementTree as ET
+
+    tree = ET.parse(path)
+    domain = tree.getroot().find("Domain")
+    grids = domain.findall("Grid")
+    if [g.get("Name") for g in grids] == ["solution"]:
+        return  # already merged (dolfinx did not rewrite since)
+    mesh_grid = next(g for g in grids if g.get("GridType") == "Uniform")
+    collections = [g for g in grids if g.get("GridType") == "Collection"]
+    topology, geometry = mesh_grid.find("Topology"), mesh_grid.find("Geometry")
+    by_time: dict[str, list] = {}
+    for coll in collections:
+        for g in coll.findall("Grid"):
+            by_time.setdefault(g.find("Time").get("Value"), []).extend(g.findall("Attribute"))
+    for g in grids:
+        domain.remove(g)
+    out = ET.SubElement(domain, "Grid", Name="solution", GridType="Collection", CollectionType="Temporal")
+    for t in sorted(by_time, key=float):
+        g = ET.SubElement(out, "Grid", Name="solution", GridType="Uniform")
+        g.append(topology)
+        g.append(geometry)
+        ET.SubElement(g, "Time", Value=t)
+        g.extend(by_time[t])
+    ET.indent(tree, space="  ")
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
+        tree.write(fh, encoding="utf-8", xml_declaration=False)
+    os.replace(tmp, path)
 
 
 class CSVWriter:

@@ -54,7 +54,7 @@ class QuadratureRule:
             el = ufl.TensorElement("Quadrature", cell, self.degree, shape=shape, quad_scheme="default")
         return fem.FunctionSpace(self.mesh, el)
 
-    def evaluator(self, expr, space: fem.FunctionSpace) -> "QuadratureEvaluator":
+    def evaluator(self, expr, space: fem.FunctionSpace) -> QuadratureEvaluator:
         return QuadratureEvaluator(self, expr, space)
 
 

@@ -14,9 +14,9 @@ without memory, no contact term without a contact part.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import ufl

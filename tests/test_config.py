@@ -1,0 +1,123 @@
+"""Scenes: defaults are the paper's, overrides, round trip, traction tables, and rejections."""
+
+import tomllib
+
+import pytest
+from conftest import ROOT
+
+from solver.config import Config, ConfigError, apply_overrides, dumps, from_dict, load
+
+
+def test_defaults_are_example1():
+    cfg = from_dict({})
+    ex1 = load(ROOT / "configs/example1.toml")
+    for section in ("material", "memory", "damage", "time"):
+        assert getattr(cfg, section) == getattr(ex1, section)
+    assert cfg.boundaries == ex1.boundaries
+    assert cfg.material.E == 100.0 and cfg.damage.q_star == 1.0 and cfg.contact[0].mu == 1e-10
+
+
+def test_overrides_documented_keys():
+    cfg = load(ROOT / "configs/example1.toml",
+               ["mesh.nx=64", "mesh.ny=64", "time.k=0.002", "output.every=0", "boundary.right.traction=[-5, -5]"])
+    assert (cfg.mesh.nx, cfg.mesh.ny, cfg.time.k, cfg.time.steps, cfg.output.every) == (64, 64, 0.002, 500, 0)
+    assert cfg.tractions[0].traction_at(0.3) == (-5.0, -5.0)
+
+
+def test_round_trip(tmp_path):
+    cfg = load(ROOT / "configs/example1.toml", ["memory.kernel='exponential'", "memory.weights=[-1.0, 2.0]",
+                                                "memory.times=[1.0, 0.5]", "solver.petsc_options.mech_snes_max_it=7"])
+    path = tmp_path / "c.toml"
+    path.write_text(dumps(cfg))
+    again = load(path)
+    assert again == Config(**{**cfg.__dict__, "source": str(path)})
+
+
+def test_traction_table_is_left_continuous_at_jumps():
+    cfg = from_dict({"boundary": {"left": {"role": "clamped"}, "top": {
+        "role": "traction", "traction": [[0.0, 0.0, -10.0], [0.5, 0.0, -10.0], [0.5, 0.0, 0.0], [1.0, 2.0, 0.0]]}}})
+    f = cfg.tractions[0].traction_at
+    assert f(0.0) == (0.0, -10.0) and f(0.5) == (0.0, -10.0)
+    assert f(0.50001) == pytest.approx((0.00004, 0.0)) and f(0.75) == pytest.approx((1.0, 0.0))
+    assert f(2.0) == (2.0, 0.0)
+
+
+REJECT = [
+    ({"meshh": {}}, "meshh"),
+    ({"mesh": {"nx": 0}}, "mesh.nx"),
+    ({"mesh": {"nx": 8.5}}, "mesh.nx"),
+    ({"mesh": {"nx": True}}, "mesh.nx"),
+    ({"mesh": {"nx": 100000, "ny": 100000}}, "mesh.nx*mesh.ny"),
+    ({"mesh": {"diagonal": "up"}}, "mesh.diagonal"),
+    ({"mesh": {"kind": "gmsh", "file": "nope.msh"}}, "mesh.file"),
+    ({"mesh": {"corners": [[1, 0], [0, 1]]}}, "mesh.corners"),
+    ({"mesh": {"colour": "red"}}, "mesh.colour"),
+    ({"material": {"E": 0.0}}, "material.E"),
+    ({"material": {"E": float("nan")}}, "material.E"),
+    ({"material": {"E": float("inf")}}, "material.E"),
+    ({"material": {"E": "stiff"}}, "material.E"),
+    ({"material": {"nu": 0.5, "model": "plane_strain"}}, "material.nu"),
+    ({"material": {"nu": 1.0}}, "material.nu"),
+    ({"material": {"model": "3d"}}, "material.model"),
+    ({"boundary": {"bottom": {"role": "contact", "mu": 0.0}, "left": {"role": "clamped"}}}, "boundary.bottom.mu"),
+    ({"boundary": {"bottom": {"role": "contact"}}}, "clamped"),
+    ({"boundary": {"left": {"role": "glued"}}}, "boundary.left.role"),
+    ({"boundary": {"left": {"role": "clamped"}, "edge": {"role": "contact"}}}, "boundary.edge.side"),
+    ({"boundary": {"left": {"role": "clamped"}, "right": {"role": "traction"}}}, "boundary.right.traction"),
+    ({"boundary": {"left": {"role": "clamped", "traction": [1, 2]}}}, "boundary.left.traction"),
+    ({"boundary": {"left": {"role": "clamped"}, "l2": {"role": "contact", "side": "left"}}}, "overlaps"),
+    ({"boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [[1, 0, 0], [0, 0, 0]]}}},
+     "boundary.right.traction"),
+    ({"boundary": {"left": {"role": "clamped", "interval": [0.5, 2.0]}}}, "boundary.left.interval"),
+    ({"memory": {"kernel": "power"}}, "memory.kernel"),
+    ({"memory": {"L": -1.0}}, "memory.L"),
+    ({"memory": {"kernel": "exponential", "weights": [1.0]}}, "memory.times"),
+    ({"memory": {"kernel": "exponential", "weights": [1.0], "times": [0.0]}}, "memory.times[0]"),
+    ({"memory": {"kernel": "constant", "times": [1.0]}}, "memory.times"),
+    ({"damage": {"kappa": -1.0}}, "damage.kappa"),
+    ({"damage": {"zeta_star": 1.5}}, "damage.zeta_star"),
+    ({"damage": {"zeta0": 0.001}}, "damage.zeta0"),
+    ({"damage": {"q_star": 0.0}}, "damage.q_star"),
+    ({"damage": {"enabled": "yes"}}, "damage.enabled"),
+    ({"time": {"T": -1.0}}, "time.T"),
+    ({"time": {"k": 0.0}}, "time.k"),
+    ({"time": {"T": 1.0, "k": 2.0}}, "time.k"),
+    ({"time": {"T": 1.0, "k": 0.3}}, "time.k"),
+    ({"solver": {"rtol": 2.0}}, "solver.rtol"),
+    ({"solver": {"petsc_options": {"mech_x": [1]}}}, "solver.petsc_options.mech_x"),
+    ({"output": {"every": -1}}, "output.every"),
+]
+
+
+@pytest.mark.parametrize("data,key", REJECT, ids=[k for _, k in REJECT])
+def test_rejections_name_the_key(data, key):
+    with pytest.raises(ConfigError) as err:
+        from_dict(data, source="scene.toml")
+    msg = str(err.value)
+    assert msg.startswith("scene.toml: ") and key in msg and "\n" not in msg
+
+
+def test_bad_files(tmp_path):
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")
+    with pytest.raises(ConfigError, match="empty"):
+        load(empty)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mesh\nnx = 3")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load(bad)
+    fake = tmp_path / "fake.msh"
+    fake.write_text("hello")
+    scene = tmp_path / "s.toml"
+    scene.write_text('[mesh]\nkind = "gmsh"\nfile = "fake.msh"\n')
+    with pytest.raises(ConfigError, match="not a gmsh"):
+        load(scene)
+    with pytest.raises(ConfigError, match="no such scene"):
+        load(tmp_path / "missing.toml")
+
+
+def test_override_syntax():
+    with pytest.raises(ConfigError, match="section.key"):
+        apply_overrides({}, ["nx=3"])
+    assert apply_overrides({}, ["mesh.diagonal=left"]) == {"mesh": {"diagonal": "left"}}
+    assert tomllib.loads("a = 1")  # the value syntax is TOML's
