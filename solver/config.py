@@ -141,6 +141,7 @@ class SolverConfig:
 
     rtol: float = 1e-10
     max_it: int = 25
+    linear: str = "auto"
     quadrature_degree: int = 1
     damage_quadrature_degree: int = 2
     contact_quadrature_degree: int = 2
@@ -485,6 +486,7 @@ def _solver(ctx: _Ctx, t: dict) -> SolverConfig:
     _need(ctx, "solver.rtol", rtol, 0 < rtol < 1, "must be in (0, 1)")
     max_it = _integer(ctx, "solver.max_it", t.get("max_it", d.max_it))
     _need(ctx, "solver.max_it", max_it, max_it >= 1, "must be >= 1")
+    linear = _string(ctx, "solver.linear", t.get("linear", d.linear), ("auto", "petsc", "mumps", "redundant"))
     degs = {}
     for key in ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree"):
         degs[key] = _integer(ctx, f"solver.{key}", t.get(key, getattr(d, key)))
@@ -500,7 +502,7 @@ def _solver(ctx: _Ctx, t: dict) -> SolverConfig:
             raise ctx.fail(f"solver.petsc_options.{key}", val, "must be finite")
         sval = ("true" if val else "false") if isinstance(val, bool) else str(val)
         popts.append((str(key), sval))
-    return SolverConfig(rtol, max_it, degs["quadrature_degree"], degs["damage_quadrature_degree"],
+    return SolverConfig(rtol, max_it, linear, degs["quadrature_degree"], degs["damage_quadrature_degree"],
                         degs["contact_quadrature_degree"], tuple(popts))
 
 

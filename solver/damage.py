@@ -57,7 +57,7 @@ class Damage:
     """Owns zeta (P1), the factored damage matrix and the source form."""
 
     def __init__(self, V: fem.FunctionSpace, u: fem.Function, cfg: DamageConfig, k: float, degree: int,
-                 petsc_options: tuple[tuple[str, str], ...] = ()) -> None:
+                 petsc_options: tuple[tuple[str, str], ...] = (), linear: str = "auto") -> None:
         self.cfg = cfg
         self.V = V
         self.zeta = fem.Function(V, name="damage")
@@ -71,7 +71,7 @@ class Damage:
         self.A.setOption(PETSc.Mat.Option.SPD, True)
         self.b = fpetsc.create_vector(self.L)
         self.x = self.b.duplicate()
-        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options)
+        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
 
     def step(self) -> DamageStepInfo:

@@ -100,9 +100,9 @@ class History:
         """Arrays that define the history (for checkpoints)."""
         raise NotImplementedError
 
-    def term(self, w) -> ufl.Form:
-        """(M, eps(w)) over the rule's dx: the memory contribution to the momentum residual."""
-        return ufl.inner(self.M, ufl.sym(ufl.grad(w))) * self.rule.dx
+    def coupling(self, w) -> ufl.Form:
+        """(S, eps(w)) for S in M's space: assembled once, B M is the memory term of the residual."""
+        return ufl.inner(ufl.TrialFunction(self.M.function_space), ufl.sym(ufl.grad(w))) * self.rule.dx
 
 
 class PronyHistory(History):

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import dolfinx.fem.petsc  # noqa: F401  (fem.petsc)
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -66,7 +67,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     damage = None
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", 1))
-        damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options)
+        damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
+                        cfg.solver.linear)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
@@ -99,8 +101,15 @@ class Outputs:
         self.avg = CellAverage(sig, self.stress, model.rule.dx)
         self.d = d
         Z = model.damage.zeta if model.damage is not None else None
-        self.zeta_norm_form = fem.form(model.zeta * model.zeta * ufl.dx)
         self.zeta = Z
+        if Z is not None:  # ||zeta||^2 = zeta . M zeta, with the mass matrix assembled once
+            z, xi = ufl.TrialFunction(Z.function_space), ufl.TestFunction(Z.function_space)
+            self.mass = fem.petsc.assemble_matrix(fem.form(z * xi * ufl.dx))
+            self.mass.assemble()
+            self._mz = self.mass.createVecLeft()
+        else:
+            area = model.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
+            self._constant_norm = model.cfg.damage.zeta0 * float(np.sqrt(area))
         self.xdmf = None
         if outdir is not None and model.cfg.output.xdmf:
             funcs = [model.u] + ([Z] if Z is not None else []) + [self.stress, self.elastic_stress, self.von_mises]
@@ -125,7 +134,10 @@ class Outputs:
                 comm.allreduce(float(a.max()) if n else -np.inf, op=MPI.MAX))
 
     def zeta_norm(self) -> float:
-        return float(np.sqrt(self.model.comm.allreduce(fem.assemble_scalar(self.zeta_norm_form), op=MPI.SUM)))
+        if self.zeta is None:
+            return self._constant_norm
+        self.mass.mult(self.zeta.vector, self._mz)
+        return float(np.sqrt(max(self._mz.dot(self.zeta.vector), 0.0)))
 
     def close(self) -> None:
         if self.xdmf is not None:
