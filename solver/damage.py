@@ -74,12 +74,16 @@ class Damage:
         self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
 
-    def step(self) -> DamageStepInfo:
-        """Advance zeta by one step using the current u and zeta (levels n-1)."""
+    def assemble_rhs(self) -> None:
+        """(zeta_{n-1} + k phi(eps(u_{n-1}), zeta_{n-1}), xi)."""
         with self.b.localForm() as b:
             b.set(0.0)
         fpetsc.assemble_vector(self.b, self.L)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
+    def step(self) -> DamageStepInfo:
+        """Advance zeta by one step using the current u and zeta (levels n-1)."""
+        self.assemble_rhs()
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
