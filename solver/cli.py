@@ -56,6 +56,9 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="benchmark the time loop (writes benchmarks/results/bench.json, bench.md)",
                        add_help=False)
 
+    sub.add_parser("convergence", help="the paper's Table 1: errors against a reference (see convergence --help)",
+                   add_help=False)
+
     c = sub.add_parser("check", help="validate a scene without running it")
     c.add_argument("config")
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
@@ -148,12 +151,16 @@ def cmd_run(args, comm: MPI.Comm) -> int:
 def main(argv: list[str] | None = None) -> int:
     comm = MPI.COMM_WORLD
     argv = sys.argv[1:] if argv is None else argv
+    _setup_logging(comm, "-v" in argv or "--verbose" in argv)
     if argv[:1] == ["bench"]:  # its own options (python -m solver bench --help)
         from .bench import main as bench_main
 
         return bench_main(argv[1:])
+    if argv[:1] == ["convergence"]:
+        from .convergence import main as convergence_main
+
+        return convergence_main(argv[1:])
     args = _parser().parse_args(argv)
-    _setup_logging(comm, getattr(args, "verbose", False))
     from .damage import DamageSolveError
     from .mechanics import SolverError
     from .stepper import NonFiniteError
