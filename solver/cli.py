@@ -59,6 +59,8 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("convergence", help="the paper's Table 1: errors against a reference (see convergence --help)",
                    add_help=False)
 
+    sub.add_parser("plot", help="PNG pictures of a results directory (see plot --help)", add_help=False)
+
     c = sub.add_parser("check", help="validate a scene without running it")
     c.add_argument("config")
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
@@ -156,6 +158,10 @@ def main(argv: list[str] | None = None) -> int:
         from .bench import main as bench_main
 
         return bench_main(argv[1:])
+    if argv[:1] == ["plot"]:
+        from .plots import main as plot_main
+
+        return plot_main(argv[1:])
     if argv[:1] == ["convergence"]:
         from .convergence import main as convergence_main
 

@@ -163,8 +163,3 @@ def write_text_atomic(path: Path, text: str) -> None:
         os.fsync(fh.fileno())
     os.replace(tmp, path)
 
-
-def read_csv(path: str | Path) -> list[dict[str, float]]:
-    """Read a timeseries.csv back as a list of rows of floats."""
-    with open(path, newline="") as fh:
-        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]

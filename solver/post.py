@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
@@ -41,3 +42,9 @@ def read_results(directory: str | Path) -> dict:
             out["fields"][name] = {float(k.replace("_", ".")): group[k][...] for k in group}
     out["times"] = sorted(next(iter(out["fields"].values())).keys()) if out["fields"] else []
     return out
+
+
+def read_csv(path: str | Path) -> list[dict[str, float]]:
+    """Read a timeseries.csv back as a list of rows of floats."""
+    with open(path, newline="") as fh:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]

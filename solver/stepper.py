@@ -93,7 +93,10 @@ class Outputs:
         T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
         self.stress = fem.Function(T0, name="stress")
         self.elastic_stress = fem.Function(T0, name="elastic_stress")
-        self.von_mises = fem.Function(fem.FunctionSpace(mesh, ("DG", 0)), name="von_mises")
+        S0 = fem.FunctionSpace(mesh, ("DG", 0))
+        self.von_mises = fem.Function(S0, name="von_mises")
+        # the paper's figures: memory balances the load, so "relaxes" / "not stress-free" are about A eps(u)
+        self.von_mises_elastic = fem.Function(S0, name="von_mises_elastic")
         mat = model.cfg.material
         sig_el = elasticity(strain(model.u), mat.E, mat.nu, mat.model)
         sig = sig_el + model.history.M if model.history is not None else sig_el
@@ -112,16 +115,17 @@ class Outputs:
             self._constant_norm = model.cfg.damage.zeta0 * float(np.sqrt(area))
         self.xdmf = None
         if outdir is not None and model.cfg.output.xdmf:
-            funcs = [model.u] + ([Z] if Z is not None else []) + [self.stress, self.elastic_stress, self.von_mises]
+            funcs = [model.u] + ([Z] if Z is not None else []) + [self.stress, self.elastic_stress, self.von_mises,
+                                                                  self.von_mises_elastic]
             self.xdmf = XDMFWriter(outdir / "solution.xdmf", mesh, funcs)
 
     def update_cell_fields(self) -> None:
         self.avg_el.update()
         self.avg.update()
         n = self.von_mises.function_space.dofmap.index_map.size_local
-        s = self.stress.x.array[: n * self.d * self.d]
-        self.von_mises.x.array[:n] = von_mises_array(s, self.d)
-        self.von_mises.x.scatter_forward()
+        for tensor, scalar in ((self.stress, self.von_mises), (self.elastic_stress, self.von_mises_elastic)):
+            scalar.x.array[:n] = von_mises_array(tensor.x.array[: n * self.d * self.d], self.d)
+            scalar.x.scatter_forward()
 
     def zeta_range(self) -> tuple[float, float]:
         comm = self.model.comm

@@ -9,8 +9,8 @@ import pytest
 from conftest import ROOT
 
 from solver.config import load
-from solver.io import TIMING_COLUMNS, read_csv
-from solver.post import point_value, read_results
+from solver.io import TIMING_COLUMNS
+from solver.post import point_value, read_csv, read_results
 from solver.stepper import run
 
 # Produced by this code (serial, n = 8, k = 0.05) and reproduced with 2 and 3 ranks to ~1e-14.
@@ -79,7 +79,7 @@ def test_parallel_equals_serial(tmp_path, nproc):
     for t in a["times"]:
         for name in ("displacement", "damage"):
             assert np.allclose(_by_node(a, name, t), _by_node(b, name, t), rtol=0, atol=1e-8)
-        for name in ("stress", "elastic_stress", "von_mises"):
+        for name in ("stress", "elastic_stress", "von_mises", "von_mises_elastic"):
             assert np.allclose(_by_cell(a, name, t), _by_cell(b, name, t), rtol=0, atol=1e-8)
     ra, rb = read_csv(tmp_path / "s/timeseries.csv"), read_csv(tmp_path / "p/timeseries.csv")
     assert len(ra) == len(rb) == 21
@@ -106,7 +106,7 @@ def test_outputs_open_with_meshio(tmp_path):
             t, point_data, cell_data = reader.read_data(k)
             times.append(t)
             assert set(point_data) == {"displacement", "damage"}
-            assert set(cell_data) == {"stress", "elastic_stress", "von_mises"}
+            assert set(cell_data) == {"stress", "elastic_stress", "von_mises", "von_mises_elastic"}
             assert point_data["displacement"].shape == (25, 3)  # XDMF pads vectors to 3 components
             assert cell_data["stress"][0].shape == (32, 9)
     assert times == [0.0, 0.25, 0.5, 0.75, 1.0]

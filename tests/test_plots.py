@@ -1,0 +1,37 @@
+"""``python -m solver plot`` renders the paper-style pictures from a results directory."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+pytestmark = pytest.mark.serial  # starts its own processes
+
+
+def test_plot_writes_pictures(tmp_path):
+    env = dict(os.environ)
+    out = tmp_path / "r"
+    run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
+           "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.25"]
+    assert subprocess.run(run, cwd=ROOT, env=env, capture_output=True).returncode == 0
+    res = subprocess.run([sys.executable, "-m", "solver", "plot", str(out)], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    names = {"von_mises_elastic_initial.png", "von_mises_elastic_final.png", "von_mises_initial.png",
+             "von_mises_final.png", "damage_final.png", "timeseries.png"}
+    assert names <= {p.name for p in out.iterdir()}
+    import matplotlib.image as mpimg
+
+    for name in names:
+        img = mpimg.imread(out / name)
+        assert img.shape[0] > 300 and img.shape[1] > 600
+        assert np.unique(img.reshape(-1, img.shape[-1]), axis=0).shape[0] > 50  # a picture, not a blank
+
+
+def test_plot_refuses_a_non_results_directory(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "solver", "plot", str(tmp_path)], cwd=ROOT, capture_output=True,
+                         text=True)
+    assert res.returncode != 0 and "no solution.h5" in res.stderr
