@@ -66,6 +66,7 @@ class QuadratureEvaluator:
 
     def __init__(self, rule: QuadratureRule, expr, space: fem.FunctionSpace) -> None:
         self.expression = fem.Expression(expr, rule.points)
+        self.Q = space
         self.cells = rule.cells
         self.bs = space.dofmap.bs
         npts = rule.points.shape[0]
@@ -84,6 +85,85 @@ class QuadratureEvaluator:
             out[:] = self._values.reshape(-1)
         else:
             out.reshape(-1, self.bs)[self.dofs] = self._values.reshape(-1, self.bs)
+        return out
+
+
+class MemorySource:
+    """H = zeta Phi_L(A eps(u)) at the rule's points, as a sparse matvec and numpy.
+
+    eps(u) at the points is a fixed linear map of u's dofs: it is tabulated once (an
+    Expression with a trial function) into a sparse matrix, and so is zeta at the points.
+    Each call is then two sparse products and a few vectorized operations, a fraction of
+    the cost of re-running the Expression kernel over all cells. Equal to the UFL
+    expression ``memory_source`` (tested), which remains the definition.
+    """
+
+    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lam: float, mu: float, L: float) -> None:
+        import scipy.sparse as sp
+
+        d = rule.mesh.geometry.dim
+        self.Q = rule.space((d, d))
+        self.u, self.zeta, self.lam, self.mu, self.L, self.d = u, zeta, lam, mu, L, d
+        cells = rule.cells
+        npts = rule.points.shape[0]
+        rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
+
+        def tabulate(expr, space) -> np.ndarray:
+            """Values at the points of an expression in a scalar trial function: (cell, point, comp, dof)."""
+            vals = fem.Expression(expr, rule.points).eval(cells)
+            return vals.reshape(len(cells), npts, -1, space.dofmap.dof_layout.num_dofs)
+
+        size_q = self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts
+
+        def nodes_of(space) -> np.ndarray:
+            return space.dofmap.list.array.reshape(-1, space.dofmap.dof_layout.num_dofs)[: len(cells)]
+
+        # eps_ij = (d_j u_i + d_i u_j) / 2 from scalar P1 gradients (a vector trial function in an
+        # Expression corrupts memory in dolfinx 0.5.2); columns are u's blocked array indices
+        V = u.function_space
+        S = fem.FunctionSpace(rule.mesh, V.ufl_element().sub_elements()[0])
+        grad = tabulate(ufl.grad(ufl.TrialFunction(S)), S)  # (cell, point, j, a)
+        nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
+        bs = V.dofmap.index_map_bs
+        size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+        rows, cols, vals = [], [], []
+        for i in range(d):
+            for j in range(d):
+                r = (rows_q * d * d + i * d + j)[:, :, None]  # (cell, point, 1)
+                for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
+                    v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
+                    rows.append(np.broadcast_to(r, v.shape).ravel())
+                    cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
+                    vals.append(v.ravel())
+        self.G = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(size_q * d * d, size_v)).tocsr()  # duplicates (i == j) are summed
+        self.Zq = None
+        if isinstance(zeta, fem.Function):
+            Z = zeta.function_space
+            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
+            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
+            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
+            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
+            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+
+    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
+        """H at the points, in the quadrature space's layout (in place on one temporary)."""
+        flat = self.G @ self.u.x.array  # eps, (point, i, j) flattened
+        e = flat.reshape(-1, self.d * self.d)
+        diag = list(range(0, self.d * self.d, self.d + 1))
+        tr = e[:, diag].sum(axis=1)
+        tr *= self.lam
+        e *= 2.0 * self.mu
+        for i in diag:
+            e[:, i] += tr
+        np.clip(flat, -self.L, self.L, out=flat)
+        if self.Zq is not None:
+            e *= (self.Zq @ self.zeta.x.array)[:, None]
+        else:
+            flat *= float(self.zeta.value)
+        if out is None:
+            return flat
+        out[:] = flat
         return out
 
 
@@ -110,11 +190,8 @@ class PronyHistory(History):
 
     def __init__(self, rule: QuadratureRule, source, weights, times, k: float) -> None:
         self.rule = rule
-        d = rule.mesh.geometry.dim
-        Q = rule.space((d, d))
-        self.M = fem.Function(Q, name="memory")
-        self.H = rule.evaluator(source, Q)
-        self._h = np.zeros_like(self.M.x.array)
+        self.M = fem.Function(source.Q, name="memory")
+        self.H = source
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
         self.weights = np.asarray(weights, dtype=float)
@@ -123,7 +200,7 @@ class PronyHistory(History):
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
 
     def commit(self, n: int) -> None:
-        h = self.H(self._h)
+        h = self.H()
         if self.terms is None:
             m = self.M.x.array
             m += (self.k * self.weights[0]) * h
@@ -148,10 +225,8 @@ class TabulatedHistory(History):
 
     def __init__(self, rule: QuadratureRule, source, table, k: float, steps: int) -> None:
         self.rule = rule
-        d = rule.mesh.geometry.dim
-        Q = rule.space((d, d))
-        self.M = fem.Function(Q, name="memory")
-        self.H = rule.evaluator(source, Q)
+        self.M = fem.Function(source.Q, name="memory")
+        self.H = source
         self.k = k
         self.past = np.zeros((steps + 1, self.M.x.array.size))
         s = np.array([r[0] for r in table])
@@ -176,7 +251,11 @@ def memory_source(u, zeta, A, L: float):
 
 
 def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, steps: int) -> History | None:
-    """The cheapest exact history for the kernel: None, a recursion, or the full past."""
+    """The cheapest exact history for the kernel: None, a recursion, or the full past.
+
+    ``source`` evaluates H at the rule's points: a :class:`MemorySource`, or any callable
+    ``source(out) -> out`` with the quadrature space as ``source.Q``.
+    """
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):

@@ -10,8 +10,8 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import MemoryConfig
-from solver.material import elasticity, strain
-from solver.memory import PronyHistory, QuadratureRule, TabulatedHistory, make_history, memory_source
+from solver.material import elasticity, lame, strain
+from solver.memory import MemorySource, PronyHistory, QuadratureRule, TabulatedHistory, make_history, memory_source
 
 
 def A(eps):
@@ -52,10 +52,9 @@ def test_recursion_matches_direct_sum(comm, name, degree):
     cfg, g = KERNELS[name]
     m, u, zeta, rule = _setup(comm, degree)
     k, steps = 0.05, 12
-    src = memory_source(u, zeta, A, cfg.L)
-    hist = make_history(cfg, rule, src, k, steps)
+    hist = make_history(cfg, rule, MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), cfg.L), k, steps)
     assert isinstance(hist, PronyHistory)
-    probe = rule.evaluator(src, hist.M.function_space)
+    probe = rule.evaluator(memory_source(u, zeta, A, cfg.L), hist.M.function_space)  # the definition, in UFL
     hs = []
     for n in range(steps):
         _drive(u, zeta, n)
@@ -74,7 +73,7 @@ def test_tabulated_kernel_matches_prony(comm):
     k, steps = 0.1, 8
     s = k * np.arange(steps + 2)
     table = tuple((float(si), float(-np.exp(-si))) for si in s)
-    src = memory_source(u, zeta, A, 1000.0)
+    src = rule.evaluator(memory_source(u, zeta, A, 1000.0), rule.space((2, 2)))
     tab = make_history(MemoryConfig(kernel="tabulated", table=table), rule, src, k, steps)
     pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0,), times=(1.0,)), rule, src, k, steps)
     assert isinstance(tab, TabulatedHistory)
@@ -105,3 +104,20 @@ def test_quadrature_layout_integrates_like_ufl(comm):
     b = fem.assemble_scalar(fem.form(ufl.inner(expr, strain(w)) * rule.dx))
     a, b = comm.allreduce(a, op=MPI.SUM), comm.allreduce(b, op=MPI.SUM)
     assert a == pytest.approx(b, rel=1e-12)
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+@pytest.mark.parametrize("damage", [True, False])
+def test_fast_source_equals_ufl_expression(comm, degree, damage):
+    """MemorySource (sparse eps and zeta operators + numpy) against the UFL definition, truncation acting."""
+    m, u, zeta, rule = _setup(comm, degree)
+    z = zeta if damage else fem.Constant(m, 0.7)
+    L = 150.0
+    fast = MemorySource(rule, u, z, *lame(100.0, 0.3, "plane_stress"), L)
+    ref = rule.evaluator(memory_source(u, z, A, L), fast.Q)
+    for n in (2, 5):
+        _drive(u, zeta, n)
+        a, b = fast(), ref()
+        assert np.allclose(a, b, rtol=1e-13, atol=1e-12 * np.abs(b).max())
+    raw = rule.evaluator(A(strain(u)), fast.Q)()
+    assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > L
