@@ -60,6 +60,7 @@ def _parser() -> argparse.ArgumentParser:
                    add_help=False)
 
     sub.add_parser("plot", help="PNG pictures of a results directory (see plot --help)", add_help=False)
+    sub.add_parser("paraview", help="render with ParaView's pvbatch (see paraview --help)", add_help=False)
 
     c = sub.add_parser("check", help="validate a scene without running it")
     c.add_argument("config")
@@ -158,6 +159,10 @@ def main(argv: list[str] | None = None) -> int:
         from .bench import main as bench_main
 
         return bench_main(argv[1:])
+    if argv[:1] == ["paraview"]:
+        from .paraview import main as paraview_main
+
+        return paraview_main(argv[1:])
     if argv[:1] == ["plot"]:
         from .plots import main as plot_main
 

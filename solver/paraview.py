@@ -1,0 +1,106 @@
+"""``python -m solver paraview RESULTS_DIR [--field F] [--time T] [--warp W] [--output PNG] [--size W H]``.
+
+Renders a results directory with ParaView's ``pvbatch`` (or ``pvpython``) running ``paraview_script.py`` (next to this
+file); the arguments are passed through unchanged (``--help`` lists them). Debian's ParaView renders through X only,
+so without a display we start a private ``Xvfb`` (package ``xvfb``) for the render. No dolfinx, no VTK here.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+SCRIPT = Path(__file__).with_name("paraview_script.py")
+NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get install paraview)"
+# variables of the caller's MPI launch or Python that must not leak into ParaView's own MPI and Python
+_DROP_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "MPICH_", "HYDRA_", "I_MPI_")
+_DROP = ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
+
+
+def executable() -> str | None:
+    """Path of ``pvbatch``, else ``pvpython``, on PATH (None if neither)."""
+    return shutil.which("pvbatch") or shutil.which("pvpython")
+
+
+def available() -> bool:
+    """True if ParaView's ``pvbatch`` or ``pvpython`` is on PATH."""
+    return executable() is not None
+
+
+def has_display() -> bool:
+    """True if an X (or Wayland) display is set."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def command(argv: list[str], exe: str | None = None) -> list[str]:
+    """``pvbatch --force-offscreen-rendering paraview_script.py ARGV`` (the display is up to the caller)."""
+    exe = exe or executable()
+    if exe is None:
+        raise FileNotFoundError("pvbatch")
+    return [exe, "--force-offscreen-rendering", str(SCRIPT), *argv]
+
+
+def environment() -> dict[str, str]:
+    """The caller's environment without MPI launcher and Python path variables."""
+    return {k: v for k, v in os.environ.items() if k not in _DROP and not k.startswith(_DROP_PREFIXES)}
+
+
+@contextmanager
+def virtual_display(xvfb: str) -> Iterator[str]:
+    """A private Xvfb server for the duration of the block; yields its DISPLAY (``:N``).
+
+    ``-displayfd`` lets the server choose a free display number and report it once it accepts connections, so
+    concurrent renders do not race for a number as ``xvfb-run -a`` can.
+    """
+    read, write = os.pipe()
+    proc = subprocess.Popen([xvfb, "-displayfd", str(write), "-screen", "0", "1920x1200x24", "-nolisten", "tcp"],
+                            pass_fds=(write,), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    os.close(write)
+    try:
+        with os.fdopen(read) as pipe:
+            number = pipe.readline().strip()  # blocks until the server is ready (or has died)
+        if not number:
+            raise RuntimeError(f"{xvfb} did not start (exit code {proc.wait(timeout=10)})")
+        yield f":{number}"
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ParaView render with ``argv`` (default ``sys.argv[1:]``); returns its exit code (2 if ParaView is missing)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    exe = executable()
+    if exe is None:
+        print(NOT_INSTALLED, file=sys.stderr)
+        return 2
+    cmd, env = command(argv, exe), environment()
+    sys.stdout.flush()
+    xvfb = shutil.which("Xvfb")
+    if has_display() or xvfb is None:  # a display, or hope for a headless (EGL/OSMesa) ParaView build
+        code = subprocess.run(cmd, env=env, check=False).returncode
+        if code not in (0, 2) and not has_display():
+            print("error: ParaView failed; without a display Debian's pvbatch needs Xvfb (apt-get install xvfb)",
+                  file=sys.stderr)
+        return code
+    try:
+        with virtual_display(xvfb) as display:
+            return subprocess.run(cmd, env={**env, "DISPLAY": display}, check=False).returncode
+    except RuntimeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
