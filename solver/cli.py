@@ -49,7 +49,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--output", "-o", help="results directory (default: the scene's output.directory)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.nx=64 --set time.k=0.002 (repeatable)")
-    r.add_argument("--overwrite", action="store_true", help="replace earlier results in the output directory")
+    mode = r.add_mutually_exclusive_group()
+    mode.add_argument("--overwrite", action="store_true", help="replace earlier results in the output directory")
+    mode.add_argument("--restart", action="store_true",
+                      help="continue the run in the output directory from its last checkpoint")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("--verbose", "-v", action="store_true")
 
@@ -68,22 +71,28 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-RESULT_FILES = ("solution.xdmf", "solution.h5", "timeseries.csv", "config.toml")
+RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5")
 
 
-def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool) -> None:
+def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool) -> None:
+    import shutil
+
     problem = None
     if comm.rank == 0:
         if outdir.exists() and not outdir.is_dir():
             problem = f"--output {outdir}: exists and is not a directory"
+        elif restart:
+            if not (outdir / "checkpoint.h5").exists():
+                problem = f"--restart: {outdir / 'checkpoint.h5'} does not exist (nothing to restart from)"
         elif outdir.is_dir():
             existing = [f for f in RESULT_FILES if (outdir / f).exists()]
             if existing and not overwrite:
                 problem = (f"--output {outdir}: holds earlier results ({', '.join(existing)}); "
-                           "pass --overwrite to replace them or choose another directory")
+                           "pass --overwrite to replace them, --restart to continue them, or choose another directory")
             elif existing:
                 for f in existing:
-                    (outdir / f).unlink()
+                    target = outdir / f
+                    shutil.rmtree(target) if target.is_dir() else target.unlink()
         if problem is None:
             outdir.mkdir(parents=True, exist_ok=True)
     problem = comm.bcast(problem, root=0)
@@ -134,13 +143,13 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     from .stepper import build_model, run
 
     model = build_model(cfg, comm)
-    _prepare_output(comm, outdir, args.overwrite)
+    _prepare_output(comm, outdir, args.overwrite, args.restart)
     log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
              comm.size)
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
     start = time.perf_counter()
     try:
-        _, rows = run(cfg, outdir, comm, on_step=update, model=model)
+        _, rows = run(cfg, outdir, comm, on_step=update, model=model, restart=args.restart)
     finally:
         if bar is not None:
             bar.close()

@@ -150,11 +150,13 @@ class SolverConfig:
 
 @dataclass(frozen=True)
 class OutputConfig:
-    """Where and how often results are written (every=0: first and last only)."""
+    """Where and how often results are written (every=0: first and last only), and checkpoints
+    every ``checkpoint_every`` steps (0: none)."""
 
     directory: str = "results"
     every: int = 1
     xdmf: bool = True
+    checkpoint_every: int = 100
 
 
 @dataclass(frozen=True)
@@ -515,7 +517,9 @@ def _output(ctx: _Ctx, t: dict) -> OutputConfig:
     every = _integer(ctx, "output.every", t.get("every", d.every))
     _need(ctx, "output.every", every, every >= 0, "must be >= 0 (0 writes the first and last levels only)")
     xdmf = _boolean(ctx, "output.xdmf", t.get("xdmf", d.xdmf))
-    return OutputConfig(directory, every, xdmf)
+    ckpt = _integer(ctx, "output.checkpoint_every", t.get("checkpoint_every", d.checkpoint_every))
+    _need(ctx, "output.checkpoint_every", ckpt, ckpt >= 0, "must be >= 0 (0: no checkpoints)")
+    return OutputConfig(directory, every, xdmf, ckpt)
 
 
 SECTIONS = ("mesh", "boundary", "material", "memory", "damage", "time", "solver", "output")

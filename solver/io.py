@@ -6,7 +6,6 @@ averages (exact L2 projection onto piecewise constants).
 
 from __future__ import annotations
 
-import csv
 import os
 from pathlib import Path
 
@@ -63,62 +62,108 @@ def von_mises_array(s: np.ndarray, dim: int) -> np.ndarray:
     return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
 
 
-class XDMFWriter:
-    """XDMF time series: dolfinx writes the data (HDF5, in parallel); the XML is then regrouped.
+def flush_hdf5() -> None:
+    """Flush every HDF5 file dolfinx has open (collective), so a killed run leaves readable data.
 
-    dolfinx 0.5.2 puts every function in its own temporal collection, which ParaView
-    loads as separate blocks and meshio not at all. After each written level rank 0
-    rewrites the XML (atomically) as one temporal collection whose grids carry every
-    field, so Warp By Vector and colouring by a cell field work on one dataset.
+    dolfinx 0.5.2 keeps its HDF5 file open between writes and offers no flush; its library
+    (libhdf5_openmpi, not h5py's) is reached through ctypes.
+    """
+    import ctypes
+
+    try:
+        lib = ctypes.CDLL("libhdf5_openmpi.so.103")
+    except OSError:  # another build: nothing we can flush
+        return
+    lib.H5Fget_obj_count.restype = ctypes.c_ssize_t
+    lib.H5Fget_obj_count.argtypes = [ctypes.c_int64, ctypes.c_uint]
+    lib.H5Fget_obj_ids.restype = ctypes.c_ssize_t
+    lib.H5Fget_obj_ids.argtypes = [ctypes.c_int64, ctypes.c_uint, ctypes.c_size_t, ctypes.POINTER(ctypes.c_int64)]
+    lib.H5Fflush.argtypes = [ctypes.c_int64, ctypes.c_int]
+    H5F_OBJ_FILE, H5F_OBJ_ALL, H5F_SCOPE_GLOBAL = 0x0001, 0x001F, 1
+    n = lib.H5Fget_obj_count(H5F_OBJ_ALL, H5F_OBJ_FILE)
+    if n <= 0:
+        return
+    ids = (ctypes.c_int64 * n)()
+    lib.H5Fget_obj_ids(H5F_OBJ_ALL, H5F_OBJ_FILE, n, ids)
+    for fid in ids:
+        lib.H5Fflush(fid, H5F_SCOPE_GLOBAL)
+
+
+class XDMFWriter:
+    """``solution.xdmf``: one temporal collection over the data parts in ``fields/``.
+
+    dolfinx writes the data of this run's part to ``fields/part{k}.h5`` (in parallel), with
+    its own XML beside it, rewritten non-atomically and with one collection per function.
+    After each written level the HDF5 file is flushed and rank 0 rewrites ``solution.xdmf``
+    atomically, each time level one grid carrying every field: ParaView and meshio read it
+    as one dataset, and a crash leaves it readable. A restart writes a new part and keeps
+    the earlier levels (``prefix``) up to its checkpoint.
     """
 
-    def __init__(self, path: Path, mesh, functions: list[fem.Function]) -> None:
-        self.path = Path(path)
+    def __init__(self, directory: Path, mesh, functions: list[fem.Function], part: int = 0,
+                 prefix: list | None = None) -> None:
+        self.directory = Path(directory)
         self.comm = mesh.comm
-        self.file = io.XDMFFile(mesh.comm, str(path), "w")
+        fields = self.directory / "fields"
+        if self.comm.rank == 0:
+            fields.mkdir(exist_ok=True)
+        self.comm.barrier()
+        self.part = fields / f"part{part}.xdmf"
+        self.file = io.XDMFFile(mesh.comm, str(self.part), "w")
         self.file.write_mesh(mesh)
         self.functions = functions
+        self.prefix = prefix or []
 
     def write(self, t: float) -> None:
         for f in self.functions:
             self.file.write_function(f, t)
+        flush_hdf5()
         self.comm.barrier()
         if self.comm.rank == 0:
-            merge_xdmf(self.path)
+            write_merged_xdmf(self.directory, self.prefix + part_grids(self.part))
 
     def close(self) -> None:
         self.file.close()
-        self.comm.barrier()
-        if self.comm.rank == 0:
-            merge_xdmf(self.path)
 
 
-def merge_xdmf(path: Path) -> None:
-    """Regroup dolfinx's per-function collections into one temporal collection (idempotent)."""
+def part_grids(part_xdmf: Path) -> list:
+    """Grids (one per written time, every field as an attribute) of a dolfinx XDMF file,
+    with data paths made relative to the results directory."""
     import xml.etree.ElementTree as ET
 
-    tree = ET.parse(path)
-    domain = tree.getroot().find("Domain")
+    domain = ET.parse(part_xdmf).getroot().find("Domain")
     grids = domain.findall("Grid")
-    if [g.get("Name") for g in grids] == ["solution"]:
-        return  # already merged (dolfinx did not rewrite since)
     mesh_grid = next(g for g in grids if g.get("GridType") == "Uniform")
-    collections = [g for g in grids if g.get("GridType") == "Collection"]
-    topology, geometry = mesh_grid.find("Topology"), mesh_grid.find("Geometry")
     by_time: dict[str, list] = {}
-    for coll in collections:
+    for coll in (g for g in grids if g.get("GridType") == "Collection"):
         for g in coll.findall("Grid"):
             by_time.setdefault(g.find("Time").get("Value"), []).extend(g.findall("Attribute"))
-    for g in grids:
-        domain.remove(g)
-    out = ET.SubElement(domain, "Grid", Name="solution", GridType="Collection", CollectionType="Temporal")
+    out = []
     for t in sorted(by_time, key=float):
-        g = ET.SubElement(out, "Grid", Name="solution", GridType="Uniform")
-        g.append(topology)
-        g.append(geometry)
+        g = ET.Element("Grid", Name="solution", GridType="Uniform")
+        g.append(mesh_grid.find("Topology"))
+        g.append(mesh_grid.find("Geometry"))
         ET.SubElement(g, "Time", Value=t)
         g.extend(by_time[t])
+        for item in g.iter("DataItem"):
+            if not item.text.startswith("fields/"):
+                item.text = f"fields/{item.text.strip()}"
+        out.append(g)
+    return out
+
+
+def write_merged_xdmf(directory: Path, grids: list) -> None:
+    """Write ``solution.xdmf`` (one temporal collection) atomically."""
+    import copy
+    import xml.etree.ElementTree as ET
+
+    root = ET.Element("Xdmf", Version="3.0")
+    coll = ET.SubElement(ET.SubElement(root, "Domain"), "Grid", Name="solution", GridType="Collection",
+                         CollectionType="Temporal")
+    coll.extend(copy.deepcopy(grids))
+    tree = ET.ElementTree(root)
     ET.indent(tree, space="  ")
+    path = Path(directory) / "solution.xdmf"
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "wb") as fh:
         fh.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
@@ -126,26 +171,45 @@ def merge_xdmf(path: Path) -> None:
     os.replace(tmp, path)
 
 
-class CSVWriter:
-    """Rows of the time series, written and flushed by rank 0 only."""
+def merged_grids(directory: Path, until: float | None = None) -> list:
+    """The grids of an existing ``solution.xdmf`` (times <= until)."""
+    import xml.etree.ElementTree as ET
 
-    def __init__(self, path: Path, comm: MPI.Comm) -> None:
+    coll = ET.parse(Path(directory) / "solution.xdmf").getroot().find("Domain").find("Grid")
+    grids = coll.findall("Grid")
+    if until is None:
+        return grids
+    return [g for g in grids if float(g.find("Time").get("Value")) <= until * (1 + 1e-12) + 1e-300]
+
+
+class CSVWriter:
+    """Rows of the time series, written by rank 0, each row one ``write()`` of a whole line.
+
+    The file is opened in append mode and every row goes out in a single system call, so
+    a killed run leaves only complete rows. ``keep`` lines (a restart's rows up to its
+    checkpoint, as written) are rewritten first, atomically.
+    """
+
+    def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None) -> None:
         self.comm = comm
-        self.fh = None
+        self.fd = None
         if comm.rank == 0:
-            self.fh = open(path, "w", newline="")
-            self.writer = csv.DictWriter(self.fh, fieldnames=CSV_COLUMNS)
-            self.writer.writeheader()
-            self.fh.flush()
+            text = ",".join(CSV_COLUMNS) + "\n" + "".join(keep or [])
+            write_text_atomic(path, text)
+            self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
 
     def write(self, row: dict) -> None:
-        if self.fh is not None:
-            self.writer.writerow({k: _fmt(row[k]) for k in CSV_COLUMNS})
-            self.fh.flush()
+        if self.fd is not None:
+            os.write(self.fd, _line(row).encode())
 
     def close(self) -> None:
-        if self.fh is not None:
-            self.fh.close()
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
+def _line(row: dict) -> str:
+    return ",".join(_fmt(row[k]) for k in CSV_COLUMNS) + "\n"
 
 
 def _fmt(v) -> str:

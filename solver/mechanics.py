@@ -265,6 +265,24 @@ class Mechanics:
         self._reuse = True
         return SolveInfo(max(its, 1), self.factorizations - f0, residual, name)
 
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict[str, np.ndarray]:
+        """Vectors carried from one level to the next (the first residual of a level is derived from them)."""
+        return {"F_last": self.F_last.array, "b": self.b.array}
+
+    def scalars(self) -> dict[str, float]:
+        return {"c_norm": self._c_norm, "reuse": float(self._reuse)}
+
+    def restore_vector(self, name: str, values: np.ndarray) -> None:
+        """Set a carried vector (owned values) from a checkpoint."""
+        vec = {"F_last": self.F_last, "b": self.b}[name]
+        vec.array[:] = values.ravel()
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        """Continue exactly where a checkpointed run was (the Jacobian is rebuilt at the first solve)."""
+        self._c_norm = float(scalars["c_norm"])
+        self._reuse = bool(scalars["reuse"])
+
     # ------------------------------------------------------------------ diagnostics
     def contact_force(self) -> float:
         if self.force_form is None:

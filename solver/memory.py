@@ -177,7 +177,7 @@ class History:
         raise NotImplementedError
 
     def state(self) -> dict[str, np.ndarray]:
-        """Arrays that define the history (for checkpoints)."""
+        """Arrays that define the history, M included (checkpoints write and restore them in place)."""
         raise NotImplementedError
 
     def coupling(self, w) -> ufl.Form:
@@ -217,7 +217,7 @@ class PronyHistory(History):
     def state(self) -> dict[str, np.ndarray]:
         if self.terms is None:
             return {"M": self.M.x.array}
-        return {f"M{i}": t for i, t in enumerate(self.terms)}
+        return {"M": self.M.x.array, **{f"M{i}": t for i, t in enumerate(self.terms)}}
 
 
 class TabulatedHistory(History):
@@ -240,7 +240,7 @@ class TabulatedHistory(History):
         self.M.x.array[:] = self.k * (lags @ self.past[: n + 1])
 
     def state(self) -> dict[str, np.ndarray]:
-        return {"past": self.past}
+        return {"M": self.M.x.array, "past": self.past}
 
 
 def memory_source(u, zeta, A, L: float):

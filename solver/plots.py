@@ -1,4 +1,5 @@
-"""Pictures of a results directory (``python -m solver plot DIR``), read from what the run wrote.
+"""Pictures of a results directory (``python -m solver plot DIR``), read from what the run wrote
+(``solution.xdmf`` and the data it points to).
 
 - ``von_mises_elastic_{initial,final}.png``: the von Mises norm of A eps(u) over the deformed
   configuration (warp factor in the title), like the paper's Figs. 5 and 8, and
@@ -130,8 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--output", default=None, help="where to write the PNGs (default: the results directory)")
     p.add_argument("--times", type=float, nargs="*", default=[], help="also draw von Mises at these written times")
     args = p.parse_args(argv)
-    if not (Path(args.directory) / "solution.h5").exists():
-        print(f"error: {args.directory}: no solution.h5 (is it a results directory?)", file=sys.stderr)
+    if not (Path(args.directory) / "solution.xdmf").exists():
+        print(f"error: {args.directory}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
         return 2
     for path in plot_results(args.directory, args.warp, args.output, tuple(args.times)):
         print(path)

@@ -26,22 +26,59 @@ def point_value(f, point) -> np.ndarray:
 
 
 def read_results(directory: str | Path) -> dict:
-    """Read solution.h5: node coordinates, cell connectivity, and {name: {t: values}} per time.
+    """Read a results directory through ``solution.xdmf``: node coordinates, cell connectivity,
+    the written times, and {field: {t: values}} (P1 fields per node, DG0 fields per cell),
+    all in the node and cell order of the first data part."""
+    import xml.etree.ElementTree as ET
 
-    P1 fields are per node (aligned with ``geometry``), DG0 fields per cell.
-    """
     import h5py
 
-    path = Path(directory) / "solution.h5"
-    out: dict = {"fields": {}}
-    with h5py.File(path, "r") as h5:
-        mesh_name = next(iter(h5["Mesh"]))
-        out["geometry"] = h5[f"Mesh/{mesh_name}/geometry"][...]
-        out["topology"] = h5[f"Mesh/{mesh_name}/topology"][...]
-        for name, group in h5["Function"].items():
-            out["fields"][name] = {float(k.replace("_", ".")): group[k][...] for k in group}
-    out["times"] = sorted(next(iter(out["fields"].values())).keys()) if out["fields"] else []
+    directory = Path(directory)
+    grids = ET.parse(directory / "solution.xdmf").getroot().find("Domain").find("Grid").findall("Grid")
+    files: dict[str, h5py.File] = {}
+
+    def load(item) -> np.ndarray:
+        name, dataset = item.text.strip().split(":", 1)
+        if name not in files:
+            files[name] = h5py.File(directory / name, "r")
+        return files[name][dataset][...]
+
+    out: dict = {"fields": {}, "times": []}
+    perms: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # geometry dataset -> (node, cell) maps to the first
+    try:
+        for g in grids:
+            t = float(g.find("Time").get("Value"))
+            out["times"].append(t)
+            gkey = g.find("Geometry").find("DataItem").text.strip()
+            if gkey not in perms:
+                x = load(g.find("Geometry").find("DataItem"))
+                cells = load(g.find("Topology").find("DataItem"))
+                if "geometry" not in out:
+                    out["geometry"], out["topology"] = x, cells
+                perms[gkey] = (_match(out["geometry"], x),
+                               _match(out["geometry"][out["topology"]].mean(axis=1), x[cells].mean(axis=1)))
+            node, cell = perms[gkey]
+            for att in g.findall("Attribute"):
+                values = load(att.find("DataItem"))
+                values = values[node] if att.get("Center") == "Node" else values[cell]
+                out["fields"].setdefault(att.get("Name"), {})[t] = values
+    finally:
+        for f in files.values():
+            f.close()
     return out
+
+
+def _match(reference: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Index into ``points`` of each reference point (parts written by other partitions order them differently)."""
+    def order(p):
+        return np.lexsort(np.round(p, 10).T[::-1])
+
+    ro, po = order(reference), order(points)
+    index = np.empty(len(reference), dtype=np.int64)
+    index[ro] = po
+    if not np.allclose(points[index], reference, rtol=0, atol=1e-9):
+        raise ValueError("a data part has a different mesh")
+    return index
 
 
 def read_csv(path: str | Path) -> list[dict[str, float]]:

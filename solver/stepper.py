@@ -25,13 +25,14 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from . import checkpoint
 from .config import Config, dumps
-from .damage import Damage
+from .damage import Damage, DamageSolveError
 from .geometry import Geometry, build
-from .io import CellAverage, CSVWriter, XDMFWriter, von_mises_array, write_text_atomic
-from .material import elasticity, strain
-from .mechanics import Mechanics
-from .memory import QuadratureRule, make_history, memory_source
+from .io import CellAverage, CSVWriter, XDMFWriter, merged_grids, von_mises_array, write_text_atomic
+from .material import elasticity, lame, strain
+from .mechanics import Mechanics, SolverError
+from .memory import MemorySource, QuadratureRule, make_history
 
 
 class NonFiniteError(RuntimeError):
@@ -73,12 +74,11 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
     rule = QuadratureRule(mesh, cfg.solver.quadrature_degree)
-    mat = cfg.material
-
-    def A(eps):
-        return elasticity(eps, mat.E, mat.nu, mat.model)
-
-    history = make_history(cfg.memory, rule, memory_source(u, zeta, A, cfg.memory.L), k, steps)
+    history = None
+    if cfg.memory.kernel != "none":
+        lam, mu = lame(cfg.material.E, cfg.material.nu, cfg.material.model)
+        source = MemorySource(rule, u, zeta, lam, mu, cfg.memory.L)
+        history = make_history(cfg.memory, rule, source, k, steps)
     mech = Mechanics(geo, cfg, u, history)
     return Model(cfg, geo, u, zeta, damage, history, rule, mech)
 
@@ -86,7 +86,7 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
 class Outputs:
     """The fields written to XDMF and the diagnostics of each level."""
 
-    def __init__(self, model: Model, outdir: Path | None) -> None:
+    def __init__(self, model: Model, outdir: Path | None, part: int = 0, prefix: list | None = None) -> None:
         self.model = model
         mesh = model.geo.mesh
         d = mesh.geometry.dim
@@ -117,7 +117,7 @@ class Outputs:
         if outdir is not None and model.cfg.output.xdmf:
             funcs = [model.u] + ([Z] if Z is not None else []) + [self.stress, self.elastic_stress, self.von_mises,
                                                                   self.von_mises_elastic]
-            self.xdmf = XDMFWriter(outdir / "solution.xdmf", mesh, funcs)
+            self.xdmf = XDMFWriter(outdir, mesh, funcs, part=part, prefix=prefix)
 
     def update_cell_fields(self) -> None:
         self.avg_el.update()
@@ -169,25 +169,42 @@ def writes_level(n: int, steps: int, every: int) -> bool:
 
 
 def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
-        on_step: Callable[[dict], None] | None = None, model: Model | None = None) -> tuple[Model, list[dict]]:
-    """Run the scene; write results to ``outdir`` (None: nothing written). Returns the model and the rows."""
+        on_step: Callable[[dict], None] | None = None, model: Model | None = None,
+        restart: bool = False) -> tuple[Model, list[dict]]:
+    """Run the scene; write results to ``outdir`` (None: nothing written). Returns the model and the rows.
+
+    With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
+    after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
+    it, and the new levels go to a new data part.
+    """
     model = model or build_model(cfg, comm)
+    steps, k = cfg.time.steps, cfg.time.k
+    start, part, keep, prefix = 0, 0, None, None
+    if restart:
+        ckpt = checkpoint.read(outdir, model)
+        start, part = ckpt.step + 1, ckpt.part
+        if comm.rank == 0:
+            keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
+            prefix = merged_grids(outdir, until=ckpt.t) if (outdir / "solution.xdmf").exists() else []
     if outdir is not None and comm.rank == 0:
         write_text_atomic(outdir / "config.toml", dumps(cfg))
-    out = Outputs(model, outdir)
-    csv = CSVWriter(outdir / "timeseries.csv", comm) if outdir is not None else None
-    steps, k = cfg.time.steps, cfg.time.k
+    out = Outputs(model, outdir, part=part, prefix=prefix)
+    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep) if outdir is not None else None
+    every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     rows: list[dict] = []
     try:
-        for n in range(steps + 1):
+        for n in range(start, steps + 1):
             t = n * k
             t0 = time.perf_counter()
             clipped = 0
-            if n > 0 and model.damage is not None:
-                clipped = model.damage.step().clipped
-            t1 = time.perf_counter()
-            info = model.mech.solve(t)
-            _check_finite(model, n, t)
+            try:
+                if n > 0 and model.damage is not None:
+                    clipped = model.damage.step().clipped
+                t1 = time.perf_counter()
+                info = model.mech.solve(t)
+                _check_finite(model, n, t)
+            except (SolverError, DamageSolveError, NonFiniteError) as exc:
+                raise type(exc)(f"step {n}: {exc}") from None
             t2 = time.perf_counter()
             zmin, zmax = out.zeta_range()
             row = {
@@ -211,6 +228,8 @@ def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
             rows.append(row)
             if csv is not None:
                 csv.write(row)
+            if every_ckpt and n < steps and n % every_ckpt == 0:
+                checkpoint.write(outdir, model, n, t, part)
             if on_step is not None:
                 on_step(row)
     finally:
@@ -218,3 +237,9 @@ def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
         if csv is not None:
             csv.close()
     return model, rows
+
+
+def _csv_lines_until(path: Path, step: int) -> list[str]:
+    """The data lines of a timeseries.csv with step <= ``step``, as written (complete lines only)."""
+    lines = path.read_text().splitlines(keepends=True)[1:] if path.exists() else []
+    return [ln for ln in lines if ln.endswith("\n") and int(ln.split(",", 1)[0]) <= step]

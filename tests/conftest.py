@@ -43,3 +43,15 @@ def unit_mesh(comm, n: int = 2):
     from dolfinx import mesh
 
     return mesh.create_unit_square(comm, n, n)
+
+
+def by_node(res: dict, name: str, t: float) -> np.ndarray:
+    """P1 values of a read_results() dict ordered by node coordinates (partitions number nodes differently)."""
+    x = np.round(res["geometry"], 12)
+    return res["fields"][name][t][np.lexsort(x.T[::-1])]
+
+
+def by_cell(res: dict, name: str, t: float) -> np.ndarray:
+    """Cell values ordered by cell midpoints."""
+    x = np.round(res["geometry"][res["topology"]].mean(axis=1), 12)
+    return res["fields"][name][t][np.lexsort(x.T[::-1])]

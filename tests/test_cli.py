@@ -7,6 +7,8 @@ import sys
 import pytest
 from conftest import ROOT
 
+from solver.post import read_csv, read_results
+
 pytestmark = pytest.mark.serial  # each test starts its own processes
 
 
@@ -54,9 +56,22 @@ def test_check_and_no_overwrite(tmp_path):
     assert res.returncode == 0 and (out / "timeseries.csv").read_bytes() != before
 
 
-def test_solver_failure_exits_1_with_reason(tmp_path):
-    res = cli(["run", "configs/example1.toml", "--output", str(tmp_path / "o"), *SMALL,
-               "--set", "solver.max_it=1"])
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_solver_failure_stops_cleanly(tmp_path, nproc):
+    """Example 3 unloads at t = 0.55 (6 Newton iterations at k = 0.05); with max_it = 4 that step fails."""
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example3.toml", "--output", str(out), "--no-progress", "--set", "time.k=0.05",
+               "--set", "solver.max_it=4", "--set", "output.checkpoint_every=5", "--set", "output.every=2"], nproc)
     assert res.returncode == 1
-    assert "failed: displacement solve at t = 0" in res.stderr and "DIVERGED_MAX_IT" in res.stderr
-    assert "Traceback" not in res.stderr
+    msg = [ln for ln in res.stderr.splitlines() if ln.startswith("failed:")]
+    assert len(msg) == 1 and "Traceback" not in res.stderr
+    assert "step 11: displacement solve at t = 0.55 failed: SNES DIVERGED_MAX_IT" in msg[0]
+    assert "last residuals [" in msg[0]
+    # everything written so far is kept and readable: rows 0..10, levels up to 0.5, the checkpoint of step 10
+    rows = read_csv(out / "timeseries.csv")
+    assert [int(r["step"]) for r in rows] == list(range(11))
+    assert read_results(out)["times"][-1] == pytest.approx(0.5)
+    import h5py
+
+    with h5py.File(out / "checkpoint.h5") as h5:
+        assert h5.attrs["step"] == 10

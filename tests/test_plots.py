@@ -34,4 +34,4 @@ def test_plot_writes_pictures(tmp_path):
 def test_plot_refuses_a_non_results_directory(tmp_path):
     res = subprocess.run([sys.executable, "-m", "solver", "plot", str(tmp_path)], cwd=ROOT, capture_output=True,
                          text=True)
-    assert res.returncode != 0 and "no solution.h5" in res.stderr
+    assert res.returncode != 0 and "no solution.xdmf" in res.stderr
