@@ -59,6 +59,8 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("bench", help="benchmark the time loop (writes benchmarks/results/bench.json, bench.md)",
                        add_help=False)
 
+    sub.add_parser("study", help="stability map and work-precision chart (study {stability,work-precision} --help)",
+                   add_help=False)
     sub.add_parser("convergence", help="the paper's Table 1: errors against a reference (see convergence --help)",
                    add_help=False)
 
@@ -176,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
         from .plots import main as plot_main
 
         return plot_main(argv[1:])
+    if argv[:1] == ["study"]:
+        from .study import main as study_main
+
+        return study_main(argv[1:])
     if argv[:1] == ["convergence"]:
         from .convergence import main as convergence_main
 

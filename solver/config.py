@@ -21,6 +21,8 @@ ROLES = ("clamped", "traction", "contact")
 DIAGONALS = ("right", "left", "right/left", "left/right", "crossed")
 MODELS = ("plane_stress", "plane_strain", "3d")
 KERNELS = ("none", "constant", "exponential", "tabulated")
+METHODS = ("newton", "penalty_duality", "fixed_point")
+DAMAGE_SCHEMES = ("explicit", "semi_implicit")
 MAX_CELLS = 20_000_000  # refuse absurd meshes before allocating anything
 
 
@@ -99,6 +101,8 @@ class MemoryConfig:
     ``constant``: g = weights[0]; ``exponential``: g(s) = sum_i weights[i]
     exp(-s/times[i]) (a Prony series); ``tabulated``: g given by ``table``
     rows [s, g(s)], linear in between (keeps the full past); ``none``: no memory.
+    ``rule``: the paper's left-rectangle sum, or the trapezoidal rule (implicit in the
+    current level: Newton only, one factorization per step).
     """
 
     kernel: str = "constant"
@@ -106,6 +110,7 @@ class MemoryConfig:
     times: tuple[float, ...] = ()
     table: tuple[tuple[float, float], ...] = ()
     L: float = 1000.0
+    rule: str = "left"
 
 
 @dataclass(frozen=True)
@@ -137,11 +142,16 @@ class TimeConfig:
 
 @dataclass(frozen=True)
 class SolverConfig:
-    """Nonlinear/linear solver settings and quadrature degrees."""
+    """Solver settings: the displacement method (newton | penalty_duality | fixed_point) with its
+    tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
+    damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees."""
 
     rtol: float = 1e-10
     max_it: int = 25
     linear: str = "auto"
+    method: str = "newton"
+    penalty_duality_omega: float = 0.5
+    damage_scheme: str = "explicit"
     quadrature_degree: int = 1
     damage_quadrature_degree: int = 2
     contact_quadrature_degree: int = 2
@@ -415,6 +425,9 @@ def _memory(ctx: _Ctx, t: dict) -> MemoryConfig:
     t = _check_keys(ctx, "memory", t, _fields(MemoryConfig))
     d = MemoryConfig()
     kernel = _string(ctx, "memory.kernel", t.get("kernel", d.kernel), KERNELS)
+    rule = _string(ctx, "memory.rule", t.get("rule", d.rule), ("left", "trapezoid"))
+    if rule == "trapezoid" and kernel not in ("constant", "exponential"):
+        raise ctx.fail("memory.rule", rule, "the trapezoidal rule is for constant and exponential kernels")
     L = _number(ctx, "memory.L", t.get("L", d.L))
     _need(ctx, "memory.L", L, L > 0, "must be > 0")
     allowed = {
@@ -446,7 +459,7 @@ def _memory(ctx: _Ctx, t: dict) -> MemoryConfig:
         s = [r[0] for r in table]
         if s[0] != 0 or any(b <= a for a, b in zip(s, s[1:])):
             raise ctx.fail("memory.table", s, "s must start at 0 and increase strictly")
-    return MemoryConfig(kernel, weights, times, table, L)
+    return MemoryConfig(kernel, weights, times, table, L, rule)
 
 
 def _damage(ctx: _Ctx, t: dict) -> DamageConfig:
@@ -489,6 +502,10 @@ def _solver(ctx: _Ctx, t: dict) -> SolverConfig:
     max_it = _integer(ctx, "solver.max_it", t.get("max_it", d.max_it))
     _need(ctx, "solver.max_it", max_it, max_it >= 1, "must be >= 1")
     linear = _string(ctx, "solver.linear", t.get("linear", d.linear), ("auto", "petsc", "mumps", "redundant"))
+    method = _string(ctx, "solver.method", t.get("method", d.method), METHODS)
+    omega = _number(ctx, "solver.penalty_duality_omega", t.get("penalty_duality_omega", d.penalty_duality_omega))
+    _need(ctx, "solver.penalty_duality_omega", omega, omega > 0, "must be > 0 (omega = value / mu)")
+    damage_scheme = _string(ctx, "solver.damage_scheme", t.get("damage_scheme", d.damage_scheme), DAMAGE_SCHEMES)
     degs = {}
     for key in ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree"):
         degs[key] = _integer(ctx, f"solver.{key}", t.get(key, getattr(d, key)))
@@ -504,7 +521,8 @@ def _solver(ctx: _Ctx, t: dict) -> SolverConfig:
             raise ctx.fail(f"solver.petsc_options.{key}", val, "must be finite")
         sval = ("true" if val else "false") if isinstance(val, bool) else str(val)
         popts.append((str(key), sval))
-    return SolverConfig(rtol, max_it, linear, degs["quadrature_degree"], degs["damage_quadrature_degree"],
+    return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, degs["quadrature_degree"],
+                        degs["damage_quadrature_degree"],
                         degs["contact_quadrature_degree"], tuple(popts))
 
 
@@ -557,7 +575,7 @@ def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> C
     dim = 2
     if mesh.kind == "gmsh":
         dim = _gmsh_dim(mesh.file)
-    return Config(
+    cfg = Config(
         mesh=mesh,
         boundaries=_boundaries(ctx, data.get("boundary"), mesh, dim),
         material=_material(ctx, data.get("material", {}), dim),
@@ -568,6 +586,9 @@ def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> C
         output=_output(ctx, data.get("output", {})),
         source=source,
     )
+    if cfg.memory.rule == "trapezoid" and cfg.solver.method != "newton" and cfg.contact:
+        raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {cfg.solver.method!r})")
+    return cfg
 
 
 def parse_override(item: str) -> tuple[list[str], Any]:

@@ -175,73 +175,100 @@ def reference(cfg_path: Path, n_ref: int, k_ref: float, ks, cache: Path, overrid
     return model, data, times, info
 
 
+class Reference:
+    """A reference solution and what comparing with it needs (fine-mesh norm matrices, levels)."""
+
+    def __init__(self, cfg_path: Path, n_ref: int, k_ref: float, ks, cache: Path, overrides: list[str]) -> None:
+        import dolfinx.fem.petsc  # noqa: F401
+        import ufl
+        from dolfinx import fem
+
+        self.cfg_path, self.overrides, self.n, self.k = Path(cfg_path), list(overrides), n_ref, k_ref
+        self.model, self.data, self.times, self.info = reference(cfg_path, n_ref, k_ref, ks, cache, overrides)
+        self.diagonal = self.model.cfg.mesh.diagonal
+        V = self.model.u.function_space
+        du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+        E = fem.petsc.assemble_matrix(fem.form(ufl.inner(ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))) * ufl.dx))
+        E.assemble()
+        Z = fem.FunctionSpace(self.model.geo.mesh, ("CG", 1))
+        z, xi = ufl.TrialFunction(Z), ufl.TestFunction(Z)
+        Mz = fem.petsc.assemble_matrix(fem.form(z * xi * ufl.dx))
+        Mz.assemble()
+        order = Fields(self.model, n_ref).u_order
+        pu = np.empty(2 * len(order), dtype=np.int64)  # grid-ordered (node, comp) -> dof
+        pu[2 * order] = 2 * np.arange(len(order))
+        pu[2 * order + 1] = 2 * np.arange(len(order)) + 1
+        z_order = grid_order(Z.tabulate_dof_coordinates(), self.model.cfg.mesh.corners, n_ref)
+        pz = np.empty(len(z_order), dtype=np.int64)
+        pz[z_order] = np.arange(len(z_order))
+        self.Eg = _petsc_to_scipy(E)[pu][:, pu].tocsr()
+        self.Mg = _petsc_to_scipy(Mz)[pz][:, pz].tocsr()
+        self.slot = {round(t / k_ref): i for i, t in enumerate(self.times)}
+        self._P: dict[int, sp.csr_matrix] = {}
+
+    def measure(self, extra: list[str], n: int, k: float) -> tuple[dict, list[dict]]:
+        """Run the scene at (n, k) with ``extra`` overrides and compare with the reference at its levels.
+
+        Returns the error record (over the levels computed, also when the run fails) and the rows.
+        A failure (SolverError, DamageSolveError, NonFiniteError) is re-raised after the record is
+        filled, with the record attached as ``exc.record``.
+        """
+        from mpi4py import MPI
+
+        from .config import load
+        from .stepper import build_model, run
+
+        if n not in self._P:
+            self._P[n] = prolongation(n, self.n, self.diagonal)
+        P = self._P[n]
+        cfg = load(self.cfg_path, [*self.overrides, *extra, f"mesh.nx={n}", f"mesh.ny={n}", f"time.k={k}",
+                                   "output.xdmf=false"])
+        t0 = time.perf_counter()
+        model = build_model(cfg, MPI.COMM_SELF)
+        fields = Fields(model, n)
+        errs, rows = [], []
+
+        def compare(row):
+            rows.append(row)
+            i = self.slot[round(row["t"] / self.k)]
+            du = (self.data[i, :, :2] - P @ fields.u()).ravel()
+            dz = self.data[i, :, 2] - P @ fields.zeta()
+            errs.append((row["t"], float(np.sqrt(du @ (self.Eg @ du))), float(np.sqrt(dz @ (self.Mg @ dz)))))
+
+        def record() -> dict:
+            e = np.array(errs) if errs else np.zeros((1, 3))
+            total = e[:, 1] + e[:, 2]
+            m = int(np.argmax(total))
+            return {"n": n, "k": k, "error": float(total[m]), "error_u": float(e[m, 1]), "error_zeta": float(e[m, 2]),
+                    "max_error_u": float(e[:, 1].max()), "max_error_zeta": float(e[:, 2].max()),
+                    "t_max": float(e[m, 0]), "error_t0": float(total[0]), "error_T": float(total[-1]),
+                    "error_after_t0": float(total[1:].max()) if len(total) > 1 else float("nan"),
+                    "seconds": time.perf_counter() - t0, "levels": len(errs)}
+
+        try:
+            run(cfg, None, MPI.COMM_SELF, on_step=compare, model=model)
+        except Exception as exc:
+            exc.record, exc.rows = record(), rows
+            raise
+        return record(), rows
+
+
 def study(cfg_path: Path, ns, ks, n_ref: int, k_ref: float, cache: Path, overrides: list[str] | None = None,
           log=print) -> tuple[list[dict], dict]:
     """Errors of every (n, k) against the reference; returns the rows and the reference info."""
-    import dolfinx.fem.petsc  # noqa: F401
-    import ufl
-    from dolfinx import fem
-    from mpi4py import MPI
-
-    from .config import load
-    from .stepper import build_model, run
-
-    overrides = overrides or []
-    ref_model, ref, ref_times, info = reference(cfg_path, n_ref, k_ref, ks, cache, overrides)
+    ref = Reference(cfg_path, n_ref, k_ref, ks, cache, overrides or [])
+    info = ref.info
     log(f"reference n={n_ref} k={k_ref}: {info['levels']} stored levels"
         + (" (from cache)" if info["cached"] else f" ({info['seconds']:.1f} s)"))
-    diagonal = ref_model.cfg.mesh.diagonal
-    # fine-mesh norm matrices, permuted to grid numbering
-    V = ref_model.u.function_space
-    du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    eps = ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))
-    E = fem.petsc.assemble_matrix(fem.form(ufl.inner(*eps) * ufl.dx))
-    E.assemble()
-    Z = fem.FunctionSpace(ref_model.geo.mesh, ("CG", 1))
-    z, xi = ufl.TrialFunction(Z), ufl.TestFunction(Z)
-    Mz = fem.petsc.assemble_matrix(fem.form(z * xi * ufl.dx))
-    Mz.assemble()
-    ref_fields = Fields(ref_model, n_ref)
-    pu = np.empty(2 * len(ref_fields.u_order), dtype=np.int64)  # grid-ordered (node, comp) -> dof
-    pu[2 * ref_fields.u_order] = 2 * np.arange(len(ref_fields.u_order))
-    pu[2 * ref_fields.u_order + 1] = 2 * np.arange(len(ref_fields.u_order)) + 1
-    z_order = grid_order(Z.tabulate_dof_coordinates(), ref_model.cfg.mesh.corners, n_ref)
-    pz = np.empty(len(z_order), dtype=np.int64)
-    pz[z_order] = np.arange(len(z_order))
-    Eg = _petsc_to_scipy(E)[pu][:, pu].tocsr()
-    Mg = _petsc_to_scipy(Mz)[pz][:, pz].tocsr()
-    slot = {round(t / k_ref): i for i, t in enumerate(ref_times)}
-
     rows = []
     for n in ns:
-        P = prolongation(n, n_ref, diagonal)
         for k in ks:
-            cfg = load(cfg_path, [*overrides, f"mesh.nx={n}", f"mesh.ny={n}", f"time.k={k}", "output.xdmf=false"])
-            model = build_model(cfg, MPI.COMM_SELF)
-            fields = Fields(model, n)
-            errs = []
-
-            def compare(row, fields=fields, P=P, k=k, errs=errs):
-                i = slot[round(row["t"] / k_ref)]
-                du = (ref[i, :, :2] - P @ fields.u()).ravel()
-                dz = ref[i, :, 2] - P @ fields.zeta()
-                errs.append((row["t"], float(np.sqrt(du @ (Eg @ du))), float(np.sqrt(dz @ (Mg @ dz)))))
-
-            t0 = time.perf_counter()
-            run(cfg, None, MPI.COMM_SELF, on_step=compare, model=model)
-            wall = time.perf_counter() - t0
-            e = np.array(errs)
-            total = e[:, 1] + e[:, 2]
-            m = int(np.argmax(total))
+            rec, _ = ref.measure([], n, k)
             pe = paper_error(n, k)
-            rows.append({
-                "n": n, "k": k, "error": float(total[m]), "error_u": float(e[m, 1]), "error_zeta": float(e[m, 2]),
-                "max_error_u": float(e[:, 1].max()), "max_error_zeta": float(e[:, 2].max()), "t_max": float(e[m, 0]),
-                "error_t0": float(total[0]), "error_T": float(total[-1]), "error_after_t0": float(total[1:].max()),
-                "paper_error": pe, "ratio": float(total[m] / pe) if pe else None, "seconds": wall,
-            })
-            log(f"n={n:4d} k={k:<7g} error {total[m]:.4e} (u {e[m, 1]:.3e}, zeta {e[m, 2]:.3e}, t={e[m, 0]:.3g})"
-                + (f"  paper {pe:.4e}" if pe else ""))
+            rec.update({"paper_error": pe, "ratio": rec["error"] / pe if pe else None})
+            rows.append(rec)
+            log(f"n={n:4d} k={k:<7g} error {rec['error']:.4e} (u {rec['error_u']:.3e}, zeta {rec['error_zeta']:.3e}, "
+                f"t={rec['t_max']:.3g})" + (f"  paper {pe:.4e}" if pe else ""))
     return rows, info
 
 

@@ -57,21 +57,34 @@ class Damage:
     """Owns zeta (P1), the factored damage matrix and the source form."""
 
     def __init__(self, V: fem.FunctionSpace, u: fem.Function, cfg: DamageConfig, k: float, degree: int,
-                 petsc_options: tuple[tuple[str, str], ...] = (), linear: str = "auto") -> None:
+                 petsc_options: tuple[tuple[str, str], ...] = (), linear: str = "auto",
+                 scheme: str = "explicit") -> None:
         self.cfg = cfg
         self.V = V
         self.zeta = fem.Function(V, name="damage")
         self.zeta.x.array[:] = cfg.zeta0
         z, xi = ufl.TrialFunction(V), ufl.TestFunction(V)
         dx = ufl.dx(metadata={"quadrature_degree": degree})
-        a = fem.form((z * xi + k * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx)
-        self.L = fem.form((self.zeta + k * source(strain(u), self.zeta, cfg)) * xi * dx)
-        self.A = fpetsc.assemble_matrix(a)
+        phi = source(strain(u), self.zeta, cfg)
+        a = (z * xi + k * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
+        rhs = (self.zeta + k * phi) * xi * dx
+        self.semi_implicit = scheme == "semi_implicit"
+        if self.semi_implicit:
+            # phi(zeta_n) ~ phi(zeta_{n-1}) + phi_zeta (zeta_n - zeta_{n-1}), phi_zeta = lambda1 H(zeta - zeta*) / eta^2:
+            # the matrix depends on zeta_{n-1} (assembled and factored every step) and loses
+            # definiteness when k phi_zeta > 1, so it is factored with LU, not Cholesky
+            phi_z = ufl.conditional(ufl.gt(self.zeta, cfg.zeta_star), cfg.lambda1 / self.zeta**2, 0.0)
+            a -= k * phi_z * z * xi * dx
+            rhs -= k * phi_z * self.zeta * xi * dx
+        self.a = fem.form(a)
+        self.L = fem.form(rhs)
+        self.A = fpetsc.assemble_matrix(self.a)
         self.A.assemble()
-        self.A.setOption(PETSc.Mat.Option.SPD, True)
+        if not self.semi_implicit:
+            self.A.setOption(PETSc.Mat.Option.SPD, True)
         self.b = fpetsc.create_vector(self.L)
         self.x = self.b.duplicate()
-        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear)
+        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear, symmetric=not self.semi_implicit)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
 
     def assemble_rhs(self) -> None:
@@ -83,6 +96,10 @@ class Damage:
 
     def step(self) -> DamageStepInfo:
         """Advance zeta by one step using the current u and zeta (levels n-1)."""
+        if self.semi_implicit:
+            self.A.zeroEntries()
+            fpetsc.assemble_matrix(self.A, self.a)
+            self.A.assemble()
         self.assemble_rhs()
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()

@@ -17,9 +17,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 CSV_COLUMNS = (
-    "step", "t", "newton_iterations", "factorizations", "residual", "contact_force", "contact_length",
-    "zeta_min", "zeta_max", "zeta_clipped", "strain_norm", "zeta_norm",
-    "time_damage", "time_memory", "time_displacement", "time_output", "wall_time",
+    "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
+    "contact_length", "max_penetration", "zeta_min", "zeta_max", "zeta_raw_min", "zeta_raw_max", "zeta_clipped",
+    "strain_norm", "zeta_norm", "time_damage", "time_memory", "time_displacement", "time_output", "wall_time",
 )
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_output", "wall_time")
 

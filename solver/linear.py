@@ -13,7 +13,7 @@ from petsc4py import PETSc
 LINEAR = ("auto", "petsc", "mumps", "redundant")
 
 
-def direct_options(comm: MPI.Comm, kind: str = "auto") -> dict[str, str]:
+def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
     """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
 
     ``petsc``: PETSc's sequential Cholesky with nested dissection (one process only);
@@ -27,14 +27,15 @@ def direct_options(comm: MPI.Comm, kind: str = "auto") -> dict[str, str]:
         kind = "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
     if kind == "petsc" and comm.size > 1:
         kind = "redundant"
-    seq = {"pc_type": "cholesky", "pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"}
+    factor = "cholesky" if symmetric else "lu"
+    seq = {"pc_type": factor, "pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"}
     if kind == "petsc":
         return {"ksp_type": "preonly", **seq}
     if kind == "redundant":
         opts = {"ksp_type": "preonly", "pc_type": "redundant", "pc_redundant_number": str(comm.size)}
         opts.update({f"redundant_{k}": v for k, v in seq.items()})
         return opts
-    return {"ksp_type": "preonly", "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps"}
+    return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps"}
 
 
 def set_options(prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...]) -> None:
@@ -57,9 +58,9 @@ def clear_options(prefix: str, keys) -> None:
 
 
 def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, str], ...],
-             kind: str = "auto") -> PETSc.KSP:
-    """A KSP on a fixed matrix; with the default options it factors once and then only solves."""
-    defaults = direct_options(comm, kind)
+             kind: str = "auto", symmetric: bool = True) -> PETSc.KSP:
+    """A KSP on a matrix; with the default options it factors once, and again only if A changes."""
+    defaults = direct_options(comm, kind, symmetric)
     set_options(prefix, defaults, user)
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)

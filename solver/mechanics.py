@@ -37,12 +37,13 @@ class SolverError(RuntimeError):
 
 @dataclass
 class SolveInfo:
-    """Newton iterations, factorizations and final residual of one solve."""
+    """Iterations, linear solves, factorizations and final residual of one solve."""
 
     iterations: int
     factorizations: int
     residual: float
     reason: str
+    linear_solves: int = 0
 
 
 class Mechanics:
@@ -50,7 +51,8 @@ class Mechanics:
 
     prefix = "mech_"
 
-    def __init__(self, geo: Geometry, cfg: Config, u: fem.Function, history: History | None) -> None:
+    def __init__(self, geo: Geometry, cfg: Config, u: fem.Function, history: History | None,
+                 implicit_term=None) -> None:
         self.geo, self.cfg, self.u = geo, cfg, u
         V = u.function_space
         mesh = geo.mesh
@@ -78,6 +80,11 @@ class Mechanics:
             self.B.assemble()
 
         a_bulk = ufl.inner(self.A(strain(du)), strain(w)) * ufl.dx
+        # an implicit term (the trapezoidal memory's current level): nonlinear, re-assembled per evaluation
+        self.Fm = self.am = None
+        if implicit_term is not None:
+            Fm = implicit_term(u, w)
+            self.Fm, self.am = fem.form(Fm), fem.form(ufl.derivative(Fm, u, du))
         self.has_contact = bool(cfg.contact)
         deg = cfg.solver.contact_quadrature_degree
         if self.has_contact:
@@ -88,11 +95,16 @@ class Mechanics:
             self.K = fpetsc.create_matrix(pattern)
             self.C = fpetsc.create_matrix(self.ac)
         else:
+            self.ac = self.C = None
             self.K = fpetsc.create_matrix(fem.form(a_bulk))
         fpetsc.assemble_matrix(self.K, fem.form(a_bulk), self.bcs)
         self.K.assemble()
-        self.J = self.K.duplicate(copy=True) if self.has_contact else self.K
-        self.J.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.J = self.K.duplicate(copy=True) if (self.has_contact or self.Fm is not None) else self.K
+        if self.Fm is not None:
+            self.Am = self.K.duplicate()
+        # with the truncation acting, the implicit memory term's Jacobian is not symmetric
+        self.symmetric = self.Fm is None
+        self.J.setOption(PETSc.Mat.Option.SYMMETRIC, self.symmetric)
 
         self.b = fpetsc.create_vector(self.L)
         self.b_prev = self.b.duplicate()
@@ -110,6 +122,10 @@ class Mechanics:
             self._c_print = self.C.createVecLeft()
             self._c_last: np.ndarray | None = None
         self._setup_snes()
+        self.points = contact.ContactPoints(geo, V, cfg.contact, deg) if self.has_contact else None
+        self.method = cfg.solver.method if self.has_contact else "newton"
+        if self.method != "newton":
+            self._setup_fixed_point(a_bulk, du, w)
 
         # diagnostics: contact functionals on the facets; ||eps(u)||^2 = u.E u with E assembled once
         self.force_form = fem.form(contact.force(u, geo, cfg.contact, deg)) if self.has_contact else None
@@ -120,9 +136,9 @@ class Mechanics:
     # ------------------------------------------------------------------ SNES
     def _setup_snes(self) -> None:
         comm = self.geo.comm
-        defaults = direct_options(comm, self.cfg.solver.linear)
+        defaults = direct_options(comm, self.cfg.solver.linear, self.symmetric)
         defaults.update({
-            "snes_type": "newtonls" if self.has_contact else "ksponly",
+            "snes_type": "newtonls" if (self.has_contact or self.Fm is not None) else "ksponly",
             "snes_linesearch_type": "basic",
             # the penalty 1/mu makes the residual jump by ~1/mu when contact first activates:
             # not a divergence, so PETSc's residual-growth test is off (max_it still applies)
@@ -152,7 +168,7 @@ class Mechanics:
             self.u.x.scatter_forward()
 
     def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
-        if self._first and self._reuse:
+        if self._first and self._reuse and self.Fm is None:
             # first evaluation of a level, at u_{n-1}: K u + j(u) = b_{n-1} + F_last there, so
             # F_0 = F_last + b_{n-1} - b_n exactly, without a matvec or a contact assembly
             self._first = False
@@ -170,6 +186,9 @@ class Mechanics:
             F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             fpetsc.set_bc(F, self.bcs, scale=0.0)
             self._c_norm = F.norm()
+        if self.Fm is not None:
+            fpetsc.assemble_vector(F, self.Fm)
+            F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.K.multAdd(x, F, F)
         F.axpy(-1.0, self.b)
         fpetsc.set_bc(F, self.bcs, x, -1.0)
@@ -191,6 +210,19 @@ class Mechanics:
         return R.ITERATING
 
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, J: PETSc.Mat, P: PETSc.Mat) -> None:
+        if self.Fm is not None:  # J = K (+ C) + dFm/du, rebuilt at every call (it depends on zeta_n)
+            self._sync(x)
+            self.K.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            for form, M in ((self.ac, self.C), (self.am, self.Am)):
+                if M is None:
+                    continue
+                M.zeroEntries()
+                cpp.fem.petsc.assemble_matrix(M, form, cpp.fem.pack_constants(form), cpp.fem.pack_coefficients(form),
+                                              self.bcs)
+                M.assemble()
+                self.J.axpy(1.0, M, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            self.factorizations += 1
+            return
         if not self.has_contact:
             if self.factorizations == 0:
                 self.factorizations = 1
@@ -235,6 +267,8 @@ class Mechanics:
             self._residual(self.snes, self.u.vector, self.r)
         # the force scale of the convergence test: loads, or the contact forces of u_{n-1}
         self._scale = max(self.b.norm(), self._c_norm)
+        if self.method != "newton":
+            return self._solve_fixed_point(t)
         self._first = True
         f0 = self.factorizations
         self.snes.solve(None, self.u.vector)
@@ -242,7 +276,7 @@ class Mechanics:
         reason = self.snes.getConvergedReason()
         history, _ = self.snes.getConvergenceHistory()
         its = self.snes.getIterationNumber()
-        if self.has_contact:
+        if self.has_contact or self.Fm is not None:
             residual = float(history[its]) if len(history) > its else float("nan")
         else:
             self._first = False
@@ -252,7 +286,7 @@ class Mechanics:
         ksp_reason = self.snes.getKSP().getConvergedReason()
         tol = self.cfg.solver.rtol * self._scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
-        if ok and not self.has_contact:
+        if ok and not self.has_contact and self.Fm is None:
             # one exact (direct) solve of a linear problem: the residual must meet the tolerance
             ok = residual <= tol
         if not ok:
@@ -263,7 +297,104 @@ class Mechanics:
                 f"{its} iterations, last residuals [{tail}] (tolerance {tol:.3e})"
             )
         self._reuse = True
-        return SolveInfo(max(its, 1), self.factorizations - f0, residual, name)
+        return SolveInfo(max(its, 1), self.factorizations - f0, residual, name, linear_solves=max(its, 1))
+
+    # ------------------------------------------------------------------ fixed-point methods
+    def _setup_fixed_point(self, a_bulk, du, w) -> None:
+        """Fixed-point methods: a matrix factored once (K, or K + omega N^T W N for penalty-duality)."""
+        from .linear import make_ksp
+
+        pts = self.points
+        if self.method == "fixed_point":
+            A = self.K
+        else:
+            # Bermudez-Moreno: omega per contact part = penalty_duality_omega / mu, lambda = 1 / (2 omega)
+            value = self.cfg.solver.penalty_duality_omega
+            n = ufl.FacetNormal(self.geo.mesh)
+            deg = self.cfg.solver.contact_quadrature_degree
+            a_pen = fem.form(sum((value / p.mu) * ufl.dot(du, n) * ufl.dot(w, n)
+                                 * self.geo.ds(self.geo.tags[p.name], metadata={"quadrature_degree": deg})
+                                 for p in self.cfg.contact))
+            P = fpetsc.create_matrix(a_pen)
+            cpp.fem.petsc.assemble_matrix(P, a_pen, cpp.fem.pack_constants(a_pen), cpp.fem.pack_coefficients(a_pen),
+                                          self.bcs)
+            P.assemble()
+            A = self.K.duplicate(copy=True)
+            A.axpy(1.0, P, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            self._omega = value * pts.inv_mu
+            self._lam = 1.0 / (2.0 * self._omega)
+            self._q = None
+        self._A_fp = A
+        self.ksp_fp = make_ksp(self.geo.comm, A, "mech_fp_", self.cfg.solver.petsc_options, self.cfg.solver.linear)
+        self.factorizations += 1
+        self._rhs = self.b.duplicate()
+
+    def _point_forces_into(self, vec: PETSc.Vec, values: np.ndarray) -> None:
+        """vec = N^T W values (assembled over ranks)."""
+        with vec.localForm() as v:
+            v.array[:] = self.points.forces(values)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
+    def _solve_fixed_point(self, t: float) -> SolveInfo:
+        """Plain fixed point K u+ = b - j(u), or Bermudez-Moreno penalty-duality; residual test only.
+
+        A small step proves nothing for a slowly contracting iteration, so only the residual
+        decides. Failures are named: diverged (residual up 1e8-fold or not finite), stagnated
+        (no 0.1 % progress over 20 iterations), too many iterations.
+        """
+        pts, x, rhs = self.points, self.u.vector, self._rhs
+        tol = self.cfg.solver.rtol * self._scale
+        self._first = False
+        self._residual(None, x, self.r)
+        history = [self.r.norm()]
+        pd = self.method == "penalty_duality"
+        if pd:
+            r = pts.penetration(self.u.x.array)
+            self._q = np.maximum(r, 0.0) * pts.inv_mu - self._omega * r  # G^omega(r) at the start
+        reason, it = ("CONVERGED_FNORM_ABS" if history[0] <= tol else None), 0
+        while reason is None:
+            it += 1
+            r = pts.penetration(self.u.x.array)
+            if pd:  # A_omega u = b + N^T W (omega g - q)
+                self._point_forces_into(rhs, self._q - self._omega * pts.g)
+            else:  # K u = b - N^T W p(u_nu - g)
+                self._point_forces_into(rhs, np.maximum(r, 0.0) * pts.inv_mu)
+            rhs.aypx(-1.0, self.b)
+            fpetsc.set_bc(rhs, self.bcs)
+            self.ksp_fp.solve(rhs, x)
+            if self.ksp_fp.getConvergedReason() < 0:
+                reason = f"DIVERGED_LINEAR_SOLVE ({self.ksp_fp.getConvergedReason()})"
+                break
+            self.u.x.scatter_forward()
+            if pd:  # q+ = Yosida approximation of G - omega I at (r + lambda q), lambda omega = 1/2
+                lam, om = self._lam, self._omega
+                xq = pts.penetration(self.u.x.array) + lam * self._q
+                rr = np.where(xq >= 0, xq / (1 - lam * om + lam * pts.inv_mu), xq / (1 - lam * om))
+                self._q = (xq - rr) / lam
+            self._residual(None, x, self.r)
+            fnorm = self.r.norm()
+            history.append(fnorm)
+            if not np.isfinite(fnorm):
+                reason = "DIVERGED_FNORM_NAN"
+            elif fnorm <= tol:
+                reason = "CONVERGED_FNORM_ABS"
+            elif fnorm > 1e8 * max(history[0], tol):
+                reason = "DIVERGED_RESIDUAL_GROWTH"
+            elif it >= 21 and fnorm > 0.999 * min(history[-21:-1]):
+                reason = "DIVERGED_STAGNATION"
+            elif it >= self.cfg.solver.max_it:
+                reason = "DIVERGED_MAX_IT"
+        if not reason.startswith("CONVERGED"):
+            self._reuse = False
+            tail = ", ".join(f"{v:.3e}" for v in history[-5:])
+            raise SolverError(f"displacement solve at t = {t:.6g} failed: {self.method} {reason}, {it} iterations, "
+                              f"last residuals [{tail}] (tolerance {tol:.3e})")
+        self._reuse = True
+        return SolveInfo(it, 0, history[-1], reason, linear_solves=it)
+
+    def max_penetration(self) -> float:
+        """Largest u_nu - g over the contact quadrature points (0 without contact)."""
+        return self.points.max_penetration(self.u.x.array) if self.points is not None else 0.0
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict[str, np.ndarray]:

@@ -188,10 +188,13 @@ class History:
 class PronyHistory(History):
     """Prony series (constant kernel: one term with tau = inf), updated recursively."""
 
-    def __init__(self, rule: QuadratureRule, source, weights, times, k: float) -> None:
+    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False) -> None:
         self.rule = rule
         self.M = fem.Function(source.Q, name="memory")
         self.H = source
+        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2
+        self.trapezoid = trapezoid
+        self.g0 = float(np.sum(weights))
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
         self.weights = np.asarray(weights, dtype=float)
@@ -201,6 +204,8 @@ class PronyHistory(History):
 
     def commit(self, n: int) -> None:
         h = self.H()
+        if self.trapezoid and n == 0:
+            h *= 0.5
         if self.terms is None:
             m = self.M.x.array
             m += (self.k * self.weights[0]) * h
@@ -259,5 +264,5 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):
-        return PronyHistory(rule, source, cfg.weights, cfg.times, k)
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid")
     return TabulatedHistory(rule, source, cfg.table, k, steps)

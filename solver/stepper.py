@@ -32,7 +32,7 @@ from .geometry import Geometry, build
 from .io import CellAverage, CSVWriter, XDMFWriter, merged_grids, von_mises_array, write_text_atomic
 from .material import elasticity, lame, strain
 from .mechanics import Mechanics, SolverError
-from .memory import MemorySource, QuadratureRule, make_history
+from .memory import MemorySource, QuadratureRule, make_history, memory_source
 
 
 class NonFiniteError(RuntimeError):
@@ -69,7 +69,7 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", 1))
         damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        cfg.solver.linear)
+                        cfg.solver.linear, cfg.solver.damage_scheme)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
@@ -79,7 +79,14 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
         lam, mu = lame(cfg.material.E, cfg.material.nu, cfg.material.model)
         source = MemorySource(rule, u, zeta, lam, mu, cfg.memory.L)
         history = make_history(cfg.memory, rule, source, k, steps)
-    mech = Mechanics(geo, cfg, u, history)
+    implicit = None
+    if history is not None and cfg.memory.rule == "trapezoid":
+        # the trapezoid's current-level term (k/2) g(0) (zeta_n Phi_L(A eps(u_n)), eps(w))
+        def implicit(u_, w_, g0=history.g0, rule=rule):
+            mat = cfg.material
+            H = memory_source(u_, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
+            return (0.5 * k * g0) * ufl.inner(H, strain(w_)) * rule.dx
+    mech = Mechanics(geo, cfg, u, history, implicit_term=implicit)
     return Model(cfg, geo, u, zeta, damage, history, rule, mech)
 
 
@@ -196,10 +203,11 @@ def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
         for n in range(start, steps + 1):
             t = n * k
             t0 = time.perf_counter()
-            clipped = 0
+            clipped, raw = 0, None
             try:
                 if n > 0 and model.damage is not None:
-                    clipped = model.damage.step().clipped
+                    dinfo = model.damage.step()
+                    clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
                 t1 = time.perf_counter()
                 info = model.mech.solve(t)
                 _check_finite(model, n, t)
@@ -207,11 +215,14 @@ def run(cfg: Config, outdir: Path | None, comm: MPI.Comm = MPI.COMM_WORLD,
                 raise type(exc)(f"step {n}: {exc}") from None
             t2 = time.perf_counter()
             zmin, zmax = out.zeta_range()
+            raw = raw or (zmin, zmax)  # the range before clipping (level 0: the initial field)
             row = {
-                "step": n, "t": t, "newton_iterations": info.iterations, "factorizations": info.factorizations,
-                "residual": info.residual, "contact_force": model.mech.contact_force(),
-                "contact_length": model.mech.contact_length(), "zeta_min": zmin, "zeta_max": zmax,
-                "zeta_clipped": clipped, "strain_norm": model.mech.strain_norm(), "zeta_norm": out.zeta_norm(),
+                "step": n, "t": t, "newton_iterations": info.iterations, "linear_solves": info.linear_solves,
+                "factorizations": info.factorizations, "residual": info.residual,
+                "contact_force": model.mech.contact_force(), "contact_length": model.mech.contact_length(),
+                "max_penetration": model.mech.max_penetration(), "zeta_min": zmin, "zeta_max": zmax,
+                "zeta_raw_min": raw[0], "zeta_raw_max": raw[1], "zeta_clipped": clipped,
+                "strain_norm": model.mech.strain_norm(), "zeta_norm": out.zeta_norm(),
             }
             t3 = time.perf_counter()
             if writes_level(n, steps, cfg.output.every) and out.xdmf is not None:

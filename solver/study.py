@@ -1,0 +1,294 @@
+"""Where methods fail, and what accuracy a second buys (``python -m solver study ...``).
+
+``study stability``: every displacement method (and the semi-implicit damage variant) over
+a sweep of the compliance mu, the step k and two meshes, on Example 1 and on a harder
+scene (configs/hard.toml: damage reaches zeta*, the contact zone moves). Each point gets
+a status (converged, diverged, stagnated, too many iterations, damage solve failed,
+non-finite) with the reason, iterations and linear solves per step, the maximum
+penetration, whether zeta left [zeta*, 1] before clipping, and the error against a fine
+reference (same scene and mu; Newton, n_ref, k_ref). Writes stability.csv and one heat
+map per method.
+
+``study work-precision``: error against the reference versus wall time over (n, k) for
+each method and variant on Example 1, with the Pareto front. Writes work_precision.csv
+and work_precision.png.
+
+Both run their (scene, mu) groups in worker processes (``--jobs``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = {"example1": ROOT / "configs" / "example1.toml", "hard": ROOT / "configs" / "hard.toml"}
+MUS = [10.0 ** -e for e in range(0, 13)]
+KS = [0.1, 0.05, 0.01, 0.005, 0.001, 0.0005]
+NS = [8, 16]
+# label -> scene overrides; the damage variant is swept at the paper's mu only
+VARIANTS = {
+    "newton": ["solver.method='newton'"],
+    "penalty_duality": ["solver.method='penalty_duality'"],
+    "fixed_point": ["solver.method='fixed_point'"],
+    "newton+semi_implicit_damage": ["solver.method='newton'", "solver.damage_scheme='semi_implicit'"],
+    "newton+trapezoid_memory": ["solver.method='newton'", "memory.rule='trapezoid'"],
+}
+STATUS = {"CONVERGED": "converged", "DIVERGED_RESIDUAL_GROWTH": "diverged", "DIVERGED_FNORM_NAN": "diverged",
+          "DIVERGED_STAGNATION": "stagnated", "DIVERGED_MAX_IT": "too_many_iterations"}
+COLUMNS = ["scene", "method", "mu", "n", "k", "status", "reason", "failed_step", "iterations_per_step",
+           "max_iterations", "linear_solves_per_step", "factorizations", "max_penetration", "zeta_left_range",
+           "zeta_raw_min", "zeta_raw_max", "error", "error_u", "error_zeta", "levels", "seconds"]
+
+
+def _status(exc: Exception) -> tuple[str, str]:
+    from .damage import DamageSolveError
+    from .stepper import NonFiniteError
+
+    text = str(exc)
+    if isinstance(exc, DamageSolveError):
+        return "damage_failed", text
+    if isinstance(exc, NonFiniteError):
+        return "non_finite", text
+    for key, status in STATUS.items():
+        if key in text:
+            return status, text
+    return "failed", text
+
+
+def _point(ref, scene: str, label: str, mu: float, n: int, k: float, max_it: int) -> dict:
+    extra = [*VARIANTS[label], f"solver.max_it={max_it}"]
+    row = {"scene": scene, "method": label, "mu": mu, "n": n, "k": k, "status": "converged", "reason": "",
+           "failed_step": ""}
+    try:
+        rec, rows = ref.measure(extra, n, k)
+    except Exception as exc:  # every failure is recorded with its reason
+        rec, rows = getattr(exc, "record", None), getattr(exc, "rows", [])
+        if rec is None:
+            raise
+        row["status"], row["reason"] = _status(exc)
+        row["failed_step"] = len(rows)
+    zstar = ref.model.cfg.damage.zeta_star
+    its = [r["newton_iterations"] for r in rows[1:]] or [0]
+    row.update({
+        "iterations_per_step": float(np.mean(its)), "max_iterations": int(max(its)),
+        "linear_solves_per_step": float(np.mean([r["linear_solves"] for r in rows[1:]] or [0])),
+        "factorizations": int(sum(r["factorizations"] for r in rows)),
+        "max_penetration": max((r["max_penetration"] for r in rows), default=float("nan")),
+        "zeta_raw_min": min((r["zeta_raw_min"] for r in rows), default=float("nan")),
+        "zeta_raw_max": max((r["zeta_raw_max"] for r in rows), default=float("nan")),
+        "error": rec["error"] if rows else float("nan"), "error_u": rec["error_u"] if rows else float("nan"),
+        "error_zeta": rec["error_zeta"] if rows else float("nan"), "levels": rec["levels"], "seconds": rec["seconds"],
+    })
+    row["zeta_left_range"] = bool(rows) and (row["zeta_raw_min"] < zstar - 1e-12 or row["zeta_raw_max"] > 1 + 1e-12)
+    return row
+
+
+def _stability_group(args: tuple) -> list[dict]:
+    scene, mu, labels, ns, ks, n_ref, k_ref, cache, max_it = args
+    from .convergence import Reference
+
+    ref = Reference(SCENES[scene], n_ref, k_ref, ks, Path(cache), [f"boundary.bottom.mu={mu!r}"])
+    out = []
+    for label in labels:
+        for n in ns:
+            for k in ks:
+                out.append(_point(ref, scene, label, mu, n, k, max_it))
+    return out
+
+
+def _write_csv(rows: list[dict], path: Path) -> None:
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _heatmaps(rows: list[dict], out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    made = []
+    marks = {"diverged": "D", "stagnated": "S", "too_many_iterations": "M", "damage_failed": "F", "non_finite": "N",
+             "failed": "X"}
+    for label in dict.fromkeys(r["method"] for r in rows):
+        sub = [r for r in rows if r["method"] == label]
+        scenes = list(dict.fromkeys(r["scene"] for r in sub))
+        ns = sorted({r["n"] for r in sub})
+        mus = sorted({r["mu"] for r in sub}, reverse=True)
+        ks = sorted({r["k"] for r in sub}, reverse=True)
+        fig, axes = plt.subplots(len(scenes), len(ns), figsize=(4.6 * len(ns) + 1, 3.2 * len(scenes) + 0.6),
+                                 squeeze=False)
+        vmax = max([r["iterations_per_step"] for r in sub if r["status"] == "converged"] or [2])
+        im = None
+        for i, scene in enumerate(scenes):
+            for j, n in enumerate(ns):
+                ax = axes[i][j]
+                grid = np.full((len(ks), len(mus)), np.nan)
+                for r in sub:
+                    if r["scene"] != scene or r["n"] != n:
+                        continue
+                    a, b = ks.index(r["k"]), mus.index(r["mu"])
+                    if r["status"] == "converged":
+                        grid[a, b] = max(r["iterations_per_step"], 1.0)
+                    else:
+                        ax.text(b, a, marks.get(r["status"], "X"), ha="center", va="center", color="white",
+                                fontsize=8, fontweight="bold")
+                    if r["zeta_left_range"] and r["status"] == "converged":
+                        ax.text(b, a, "*", ha="center", va="center", color="red", fontsize=11)
+                ax.set_facecolor("#444444")
+                im = ax.imshow(grid, cmap="viridis", norm=LogNorm(vmin=1, vmax=max(vmax, 2)), aspect="auto")
+                ax.set_xticks(range(len(mus)), [f"{math.log10(m):.0f}" for m in mus], fontsize=7)
+                ax.set_yticks(range(len(ks)), [f"{k:g}" for k in ks], fontsize=7)
+                ax.set_xlabel("log10 mu", fontsize=8)
+                ax.set_ylabel("k", fontsize=8)
+                ax.set_title(f"{scene}, n = {n}", fontsize=9)
+        fig.colorbar(im, ax=axes, label="iterations per step (converged)")
+        fig.suptitle(f"{label}: grey = failed (D diverged, S stagnated, M too many iterations, F damage solve, "
+                     f"N non-finite); red * = zeta left [zeta*, 1] before clipping", fontsize=8)
+        path = out / f"stability_{label}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        made.append(path)
+    return made
+
+
+def stability(args) -> int:
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    groups = []
+    for scene in args.scenes:
+        for mu in args.mus:
+            groups.append((scene, mu, [m for m in args.methods if "+" not in m], args.ns, args.ks, args.ref_n,
+                           args.ref_k, args.cache, args.max_it))
+        # the damage variant's stability depends on k and the damage, not on mu: swept at the paper's mu
+        variants = [m for m in args.methods if "+" in m]
+        if variants:
+            groups.append((scene, 1e-10, variants, args.ns, args.ks, args.ref_n, args.ref_k, args.cache, args.max_it))
+    rows = _run_groups(_stability_group, groups, args.jobs)
+    _write_csv(rows, out / "stability.csv")
+    for path in _heatmaps(rows, out):
+        print(path)
+    counts: dict[str, dict[str, int]] = {}
+    for r in rows:
+        counts.setdefault(r["method"], {}).setdefault(r["status"], 0)
+        counts[r["method"]][r["status"]] += 1
+    for label, c in counts.items():
+        print(f"{label:32s} " + ", ".join(f"{k}: {v}" for k, v in sorted(c.items())))
+    print(f"wrote {out / 'stability.csv'}")
+    return 0
+
+
+def _wp_group(args: tuple) -> list[dict]:
+    scene, labels, ns, ks, n_ref, k_ref, cache, mu = args
+    from .convergence import Reference
+
+    ref = Reference(SCENES[scene], n_ref, k_ref, ks, Path(cache), [f"boundary.bottom.mu={mu!r}"])
+    return [_point(ref, scene, label, mu, n, k, 200) for label in labels for n in ns for k in ks]
+
+
+def pareto(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of the points not beaten in both time and error (lower is better in both)."""
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    front, best = [], math.inf
+    for i in order:
+        if points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return front
+
+
+def work_precision(args) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    groups = [("example1", [m], args.ns, args.ks, args.ref_n, args.ref_k, args.cache, 1e-10) for m in args.methods]
+    rows = _run_groups(_wp_group, groups, args.jobs)
+    ok = [r for r in rows if r["status"] == "converged"]
+    front = set(pareto([(r["seconds"], r["error"]) for r in ok]))
+    for i, r in enumerate(ok):
+        r["pareto"] = i in front
+    _write_csv(rows, out / "work_precision.csv")
+    with open(out / "work_precision.csv") as fh:  # add the Pareto flag column
+        lines = fh.read().splitlines()
+    flags = {(r["method"], r["n"], r["k"]): r.get("pareto", False) for r in rows}
+    with open(out / "work_precision.csv", "w") as fh:
+        fh.write(lines[0] + ",pareto\n")
+        for line, r in zip(lines[1:], rows):
+            fh.write(f"{line},{flags[(r['method'], r['n'], r['k'])]}\n")
+    fig, ax = plt.subplots(figsize=(7.5, 5.2))
+    for label, marker in zip(dict.fromkeys(r["method"] for r in ok), "osD^vP"):
+        sub = [r for r in ok if r["method"] == label]
+        ax.loglog([r["seconds"] for r in sub], [r["error"] for r in sub], marker, alpha=0.8, label=label)
+    pf = sorted((r for r in ok if r["pareto"]), key=lambda r: r["seconds"])
+    ax.loglog([r["seconds"] for r in pf], [r["error"] for r in pf], "-", color="k", lw=1, label="Pareto front")
+    for r in pf:
+        ax.annotate(f"n={r['n']},k={r['k']:g}", (r["seconds"], r["error"]), fontsize=6, xytext=(3, 3),
+                    textcoords="offset points")
+    failed = sorted({r["method"] for r in rows if r["status"] != "converged"})
+    ax.set_xlabel("wall time of the run (s)")
+    ax.set_ylabel(r"$\max_n \|\varepsilon(u-u^{ref})\| + \|\zeta-\zeta^{ref}\|$")
+    ax.set_title("Example 1 (mu = 1e-10): error against wall time" + (f"\n(failed, not drawn: {', '.join(failed)})"
+                                                                      if failed else ""), fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "work_precision.png", dpi=120)
+    plt.close(fig)
+    print(f"wrote {out / 'work_precision.csv'} and {out / 'work_precision.png'}")
+    return 0
+
+
+def _run_groups(fn, groups: list[tuple], jobs: int) -> list[dict]:
+    rows: list[dict] = []
+    t0 = time.perf_counter()
+    if jobs <= 1:
+        results = map(fn, groups)
+    else:
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn"))
+        results = pool.map(fn, groups)
+    for i, res in enumerate(results, start=1):
+        rows.extend(res)
+        print(f"[{i}/{len(groups)}] {res[0]['scene']} mu={res[0]['mu']:g} {res[0]['method']}...: "
+              f"{sum(r['status'] == 'converged' for r in res)}/{len(res)} converged ({time.perf_counter() - t0:.0f} s)",
+              flush=True)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="solver study", description="stability map and work-precision chart")
+    sub = p.add_subparsers(dest="which", required=True)
+    for name in ("stability", "work-precision"):
+        s = sub.add_parser(name)
+        s.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
+        s.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache"))
+        s.add_argument("--ref-n", type=int, default=32)
+        s.add_argument("--ref-k", type=float, default=0.0005)
+        s.add_argument("--jobs", type=int, default=2)
+    st, wp = sub.choices["stability"], sub.choices["work-precision"]
+    st.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    st.add_argument("--mus", type=float, nargs="+", default=MUS)
+    st.add_argument("--ks", type=float, nargs="+", default=KS)
+    st.add_argument("--ns", type=int, nargs="+", default=NS)
+    st.add_argument("--methods", nargs="+", default=["newton", "penalty_duality", "fixed_point",
+                                                      "newton+semi_implicit_damage"], choices=list(VARIANTS))
+    st.add_argument("--max-it", type=int, default=200, help="iteration limit per step, for every method")
+    wp.add_argument("--ks", type=float, nargs="+", default=[0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001])
+    wp.add_argument("--ns", type=int, nargs="+", default=[4, 8, 16])
+    wp.add_argument("--methods", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    args = p.parse_args(argv)
+    return stability(args) if args.which == "stability" else work_precision(args)
