@@ -18,6 +18,7 @@ import argparse
 import csv
 import hashlib
 import json
+import os
 import time
 from pathlib import Path
 
@@ -154,7 +155,7 @@ def reference(cfg_path: Path, n_ref: int, k_ref: float, ks, cache: Path, overrid
         data = np.load(path, mmap_mode="r")
     else:
         fields = Fields(model, n_ref)
-        tmp = path.with_suffix(".tmp.npy")
+        tmp = path.with_suffix(f".{os.getpid()}.tmp.npy")  # concurrent builders each write their own, rename wins
         data = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float64, shape=(len(levels), nodes, 3))
         slot = {int(m): i for i, m in enumerate(levels)}
 
@@ -169,7 +170,7 @@ def reference(cfg_path: Path, n_ref: int, k_ref: float, ks, cache: Path, overrid
         info["seconds"] = time.perf_counter() - t0
         data.flush()
         del data
-        tmp.rename(path)
+        os.replace(tmp, path)
         data = np.load(path, mmap_mode="r")
     times = levels * k_ref
     return model, data, times, info

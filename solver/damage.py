@@ -69,6 +69,7 @@ class Damage:
         a = (z * xi + k * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
         rhs = (self.zeta + k * phi) * xi * dx
         self.semi_implicit = scheme == "semi_implicit"
+        self.k = k
         if self.semi_implicit:
             # phi(zeta_n) ~ phi(zeta_{n-1}) + phi_zeta (zeta_n - zeta_{n-1}), phi_zeta = lambda1 H(zeta - zeta*) / eta^2:
             # the matrix depends on zeta_{n-1} (assembled and factored every step) and loses
@@ -97,6 +98,17 @@ class Damage:
     def step(self) -> DamageStepInfo:
         """Advance zeta by one step using the current u and zeta (levels n-1)."""
         if self.semi_implicit:
+            # the linearised step divides by 1 - k phi_zeta (phi_zeta = lambda1 / zeta^2 above zeta*): where
+            # k phi_zeta >= 1 it is meaningless (zeta jumps far outside [zeta*, 1]); refuse rather than clip it
+            z = self.zeta.x.array[: self.nlocal]
+            above = z > self.cfg.zeta_star
+            worst = float((self.k * self.cfg.lambda1 / z[above] ** 2).max()) if above.any() else 0.0
+            worst = self.V.mesh.comm.allreduce(worst, op=MPI.MAX)
+            if worst >= 1.0:
+                raise DamageSolveError(
+                    f"semi-implicit damage step unstable: k lambda1 / zeta^2 = {worst:.3g} >= 1 "
+                    f"(min zeta {self.V.mesh.comm.allreduce(float(z.min()), op=MPI.MIN):.3g}); use "
+                    "solver.damage_scheme = 'explicit' or a smaller k")
             self.A.zeroEntries()
             fpetsc.assemble_matrix(self.A, self.a)
             self.A.assemble()

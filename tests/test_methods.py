@@ -143,3 +143,14 @@ def test_trapezoid_needs_newton():
 
     with pytest.raises(ConfigError, match="memory.rule"):
         from_dict({"memory": {"rule": "trapezoid"}, "solver": {"method": "penalty_duality"}})
+
+
+def test_semi_implicit_damage_refuses_an_unstable_step(comm):
+    """On the hard scene zeta nears zeta* and k lambda1 / zeta^2 passes 1 at k = 0.1: a named failure,
+    where clipping would otherwise hide a zeta of about -50."""
+    from solver.damage import DamageSolveError
+
+    cfg = load(ROOT / "configs/hard.toml", ["mesh.nx=8", "mesh.ny=8", "time.k=0.1",
+                                            "solver.damage_scheme='semi_implicit'"])
+    with pytest.raises(DamageSolveError, match="semi-implicit damage step unstable"):
+        run(cfg, None, comm)
