@@ -94,12 +94,22 @@ def main(argv: list[str] | None = None) -> int:
             print("error: ParaView failed; without a display Debian's pvbatch needs Xvfb (apt-get install xvfb)",
                   file=sys.stderr)
         return code
-    try:
-        with virtual_display(xvfb) as display:
-            return subprocess.run(cmd, env={**env, "DISPLAY": display}, check=False).returncode
-    except RuntimeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    # Debian's pvbatch under Xvfb has been seen to abort while creating its window (twice in
+    # about 40 renders, not reproducible): a crash (death by a signal) is retried once on a
+    # fresh virtual display; any other failure is returned as it is
+    code = 1
+    for attempt in range(2):
+        try:
+            with virtual_display(xvfb) as display:
+                code = subprocess.run(cmd, env={**env, "DISPLAY": display}, check=False).returncode
+        except RuntimeError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        if code >= 0:
+            return code
+        if attempt == 0:
+            print(f"ParaView crashed (signal {-code}); retrying once on a fresh virtual display", file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":
