@@ -95,8 +95,8 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
         return code
     # Debian's pvbatch under Xvfb has been seen to abort while creating its window (twice in
-    # about 40 renders, not reproducible): a crash (death by a signal) is retried once on a
-    # fresh virtual display; any other failure is returned as it is
+    # about 40 renders, not reproducible): a crash is retried once on a fresh virtual display;
+    # the script's own refusals (exit 2: bad directory, field or option) are not
     code = 1
     for attempt in range(2):
         try:
@@ -105,10 +105,10 @@ def main(argv: list[str] | None = None) -> int:
         except RuntimeError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
-        if code >= 0:
+        if code in (0, 2):
             return code
         if attempt == 0:
-            print(f"ParaView crashed (signal {-code}); retrying once on a fresh virtual display", file=sys.stderr)
+            print(f"ParaView failed (exit {code}); retrying once on a fresh virtual display", file=sys.stderr)
     return code
 
 
