@@ -9,12 +9,14 @@
 # Run a scene (the entrypoint is `python -m solver`; results go to a mounted folder):
 #   mkdir -p out && docker run --rm -v "$PWD/out:/out" campo-solver run configs/example2.toml --output /out/ex2
 #   docker run --rm campo-solver check configs/example1.toml
+#   docker run --rm -v "$PWD/out:/out" campo-solver plot /out/ex2      # PNGs, rendered off-screen
 # Run in parallel (MPI, 2 processes): replace the entrypoint with mpirun
 #   docker run --rm -v "$PWD/out:/out" --entrypoint mpirun campo-solver \
 #       -n 2 python -m solver run configs/example1.toml --output /out/ex1
 # Own scenes: mount them too, e.g. -v "$PWD/scenes:/scenes" ... run /scenes/my.toml --output /out/my
-# The output folder must be writable by uid 1000 (or add --user "$(id -u):$(id -g)";
-# another uid then recompiles the forms into its own cache, since HOME stays /home/solver).
+# The output folder must be writable by uid 1000, or run as yourself with
+#   --user "$(id -u):$(id -g)" -e XDG_CACHE_HOME=/tmp/cache
+# (the form cache in /home/solver is uid 1000's; forms then compile again on first use).
 # Tests inside the image:
 #   docker run --rm --entrypoint python campo-solver -m pytest -q -m "not slow"
 #
@@ -54,10 +56,12 @@ ENV PATH=/opt/solver/.venv/bin:$PATH \
     OMPI_MCA_rmaps_base_oversubscribe=1 \
     OMPI_MCA_btl_vader_single_copy_mechanism=none
 
-# Compile the forms of the default scene now (into /home/solver/.cache/fenics),
-# so a first run doesn't: two steps of Example 1 at its own time step k (the
-# damage form holds k, so another k compiles that form again on first use).
-RUN python -m solver run configs/example1.toml --set time.T=0.02 --output /tmp/precompile --no-progress \
+# Compile the forms of the example scenes now (into /home/solver/.cache/fenics), so that a
+# first run doesn't: two steps of each (k is a constant in the forms, so any k reuses them).
+RUN for scene in configs/example*.toml; do \
+        python -m solver run "$scene" --set time.T=0.02 --no-progress \
+            --output "/tmp/precompile/$(basename "$scene" .toml)" || exit 1; \
+    done \
  && rm -rf /tmp/precompile
 
 ENTRYPOINT ["python", "-m", "solver"]

@@ -25,10 +25,12 @@ system-packages:
 	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
 
+# pip is held to Debian's numpy (petsc4py is built against it) by a constraints file
 .venv/.installed: pyproject.toml | system-packages
 	@[ -x $(PY) ] || /usr/bin/python3 -m venv --system-site-packages .venv
+	@/usr/bin/python3 -c 'import numpy; print("numpy==" + numpy.__version__)' > .venv/constraints.txt
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e ".[dev]"
+	$(PY) -m pip install -q -c .venv/constraints.txt -e ".[dev]"
 	@touch $@
 
 demo: install

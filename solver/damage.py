@@ -66,8 +66,9 @@ class Damage:
         z, xi = ufl.TrialFunction(V), ufl.TestFunction(V)
         dx = ufl.dx(metadata={"quadrature_degree": degree})
         phi = source(strain(u), self.zeta, cfg)
-        a = (z * xi + k * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
-        rhs = (self.zeta + k * phi) * xi * dx
+        k_ = fem.Constant(V.mesh, PETSc.ScalarType(k))  # a constant, not a number: one compiled form for every k
+        a = (z * xi + k_ * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
+        rhs = (self.zeta + k_ * phi) * xi * dx
         self.semi_implicit = scheme == "semi_implicit"
         self.k = k
         if self.semi_implicit:
@@ -75,8 +76,8 @@ class Damage:
             # the matrix depends on zeta_{n-1} (assembled and factored every step) and loses
             # definiteness when k phi_zeta > 1, so it is factored with LU, not Cholesky
             phi_z = ufl.conditional(ufl.gt(self.zeta, cfg.zeta_star), cfg.lambda1 / self.zeta**2, 0.0)
-            a -= k * phi_z * z * xi * dx
-            rhs -= k * phi_z * self.zeta * xi * dx
+            a -= k_ * phi_z * z * xi * dx
+            rhs -= k_ * phi_z * self.zeta * xi * dx
         self.a = fem.form(a)
         self.L = fem.form(rhs)
         self.A = fpetsc.assemble_matrix(self.a)

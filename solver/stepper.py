@@ -85,7 +85,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
         def implicit(u_, w_, g0=history.g0, rule=rule):
             mat = cfg.material
             H = memory_source(u_, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
-            return (0.5 * k * g0) * ufl.inner(H, strain(w_)) * rule.dx
+            half_k_g0 = fem.Constant(mesh, PETSc.ScalarType(0.5 * k * g0))  # not compiled into the form
+            return half_k_g0 * ufl.inner(H, strain(w_)) * rule.dx
     mech = Mechanics(geo, cfg, u, history, implicit_term=implicit)
     return Model(cfg, geo, u, zeta, damage, history, rule, mech)
 
