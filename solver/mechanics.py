@@ -24,7 +24,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import contact
-from .config import Config
+from .config import Config, ConfigError
 from .geometry import Geometry
 from .linear import REASONS_SNES, clear_options, direct_options, set_options
 from .material import elasticity, strain
@@ -122,8 +122,11 @@ class Mechanics:
             self._c_print = self.C.createVecLeft()
             self._c_last: np.ndarray | None = None
         self._setup_snes()
-        self.points = contact.ContactPoints(geo, V, cfg.contact, deg) if self.has_contact else None
+        # the contact term at its points (2-D): the fixed-point methods and the penetration diagnostic
+        self.points = contact.ContactPoints(geo, V, cfg.contact, deg) if self.has_contact and geo.dim == 2 else None
         self.method = cfg.solver.method if self.has_contact else "newton"
+        if self.method != "newton" and self.points is None:
+            raise ConfigError(f"solver.method = {self.method!r}: available for 2-D meshes only; use 'newton'")
         if self.method != "newton":
             self._setup_fixed_point(a_bulk, du, w)
 
@@ -393,8 +396,10 @@ class Mechanics:
         return SolveInfo(it, 0, history[-1], reason, linear_solves=it)
 
     def max_penetration(self) -> float:
-        """Largest u_nu - g over the contact quadrature points (0 without contact)."""
-        return self.points.max_penetration(self.u.x.array) if self.points is not None else 0.0
+        """Largest u_nu - g over the contact quadrature points (0 without contact, NaN in 3-D: not computed)."""
+        if self.points is not None:
+            return self.points.max_penetration(self.u.x.array)
+        return float("nan") if self.has_contact else 0.0
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict[str, np.ndarray]:

@@ -81,3 +81,50 @@ def test_block_pressed_by_foundation(comm, mu):
     assert rows[-1]["contact_force"] == pytest.approx(E * a, rel=1e-6)
     assert rows[-1]["contact_length"] == pytest.approx(1.0)
     assert rows[0]["newton_iterations"] <= 3
+
+
+def _box_msh(path, n=3):
+    """A unit cube meshed by gmsh with named faces: top (z = 1), bottom (z = 0), and the volume."""
+    import gmsh
+
+    gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("box")
+        vol = gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        for tag, (name, z) in enumerate((("top", 1.0), ("bottom", 0.0)), start=1):
+            faces = [s for _, s in gmsh.model.getEntities(2)
+                     if abs(gmsh.model.occ.getCenterOfMass(2, s)[2] - z) < 1e-9]
+            gmsh.model.addPhysicalGroup(2, faces, tag)
+            gmsh.model.setPhysicalName(2, tag, name)
+        gmsh.model.addPhysicalGroup(3, [vol], 10)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 1.0 / n)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+@pytest.mark.serial  # the mesh file is written by this process
+def test_block_pressed_by_foundation_3d(tmp_path):
+    """The 1-D closed form of the pressed block in 3-D (nu = 0): u_z = a (1 - z), a = delta / (1 + E mu)."""
+    E, delta, mu = 100.0, 1e-3, 1e-2
+    msh = tmp_path / "box.msh"
+    _box_msh(msh)
+    cfg = from_dict({
+        "mesh": {"kind": "gmsh", "file": str(msh)},
+        "boundary": {"top": {"role": "clamped"}, "bottom": {"role": "contact", "gap": -delta, "mu": mu}},
+        "material": {"E": E, "nu": 0.0, "model": "3d"},
+        "memory": {"kernel": "none"},
+        "damage": {"enabled": False},
+        "time": {"T": 1.0, "k": 1.0},
+    })
+    comm = MPI.COMM_WORLD
+    model, rows = run(cfg, None, comm)
+    a = delta / (1 + E * mu)
+    x = model.u.function_space.tabulate_dof_coordinates()
+    u = model.u.x.array.reshape(-1, 3)
+    assert np.abs(u[:, 2] - a * (1 - x[:, 2])).max() < 1e-9 * a
+    assert np.abs(u[:, :2]).max() < 1e-12
+    assert rows[-1]["contact_force"] == pytest.approx(E * a, rel=1e-6)
