@@ -10,8 +10,6 @@ from __future__ import annotations
 from mpi4py import MPI
 from petsc4py import PETSc
 
-LINEAR = ("auto", "petsc", "mumps", "redundant")
-
 
 def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
     """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
