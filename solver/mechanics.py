@@ -31,6 +31,14 @@ from .material import elasticity, strain
 from .memory import History
 
 
+def _assemble_without_diagonal(M: PETSc.Mat, form, bcs) -> None:
+    """M = the form, with the clamped rows and columns zero and no unit diagonal: a term to add to K,
+    whose own diagonal already holds the boundary condition."""
+    M.zeroEntries()
+    cpp.fem.petsc.assemble_matrix(M, form, cpp.fem.pack_constants(form), cpp.fem.pack_coefficients(form), bcs)
+    M.assemble()
+
+
 class SolverError(RuntimeError):
     """A displacement solve did not converge; the message says why."""
 
@@ -219,10 +227,7 @@ class Mechanics:
             for form, M in ((self.ac, self.C), (self.am, self.Am)):
                 if M is None:
                     continue
-                M.zeroEntries()
-                cpp.fem.petsc.assemble_matrix(M, form, cpp.fem.pack_constants(form), cpp.fem.pack_coefficients(form),
-                                              self.bcs)
-                M.assemble()
+                _assemble_without_diagonal(M, form, self.bcs)
                 self.J.axpy(1.0, M, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             self.factorizations += 1
             return
@@ -231,11 +236,7 @@ class Mechanics:
                 self.factorizations = 1
             return
         self._sync(x)
-        self.C.zeroEntries()
-        cpp.fem.petsc.assemble_matrix(
-            self.C, self.ac, cpp.fem.pack_constants(self.ac), cpp.fem.pack_coefficients(self.ac), self.bcs
-        )
-        self.C.assemble()
+        _assemble_without_diagonal(self.C, self.ac, self.bcs)
         self.C.mult(self._probe, self._c_print)
         values = self._c_print.array_r
         changed = self._c_last is None or not np.array_equal(values, self._c_last)
@@ -319,9 +320,7 @@ class Mechanics:
                                  * self.geo.ds(self.geo.tags[p.name], metadata={"quadrature_degree": deg})
                                  for p in self.cfg.contact))
             P = fpetsc.create_matrix(a_pen)
-            cpp.fem.petsc.assemble_matrix(P, a_pen, cpp.fem.pack_constants(a_pen), cpp.fem.pack_coefficients(a_pen),
-                                          self.bcs)
-            P.assemble()
+            _assemble_without_diagonal(P, a_pen, self.bcs)
             A = self.K.duplicate(copy=True)
             A.axpy(1.0, P, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             self._omega = value * pts.inv_mu
