@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import gc
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,3 +58,20 @@ def by_cell(res: dict, name: str, t: float) -> np.ndarray:
     """Cell values ordered by cell midpoints."""
     x = np.round(res["geometry"][res["topology"]].mean(axis=1), 12)
     return res["fields"][name][t][np.lexsort(x.T[::-1])]
+
+
+def mpi_env() -> dict:
+    """The environment for mpirun as root (as the machines here run it)."""
+    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+
+
+def solver_cmd(args: list[str], nproc: int = 1) -> list[str]:
+    """``python -m solver ARGS``, under ``mpirun -n NPROC --oversubscribe`` when nproc > 1."""
+    cmd = [sys.executable, "-m", "solver", *args]
+    return ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd] if nproc > 1 else cmd
+
+
+def run_cli(args: list[str], nproc: int = 1, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run the command line as a user would (from the repository root), capturing its output."""
+    return subprocess.run(solver_cmd(args, nproc), cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
+                          timeout=timeout)

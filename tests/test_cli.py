@@ -1,23 +1,11 @@
 """The command line as a user meets it: exit codes, one-line errors, no silent overwrite, MPI."""
 
-import os
-import subprocess
-import sys
-
 import pytest
-from conftest import ROOT
+from conftest import run_cli as cli
 
 from solver.post import read_csv, read_results
 
 pytestmark = pytest.mark.serial  # each test starts its own processes
-
-
-def cli(args, nproc=1):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "solver", *args]
-    if nproc > 1:
-        cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
-    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
 
 
 SMALL = ["--set", "mesh.nx=4", "--set", "mesh.ny=4", "--set", "time.k=0.5", "--no-progress"]

@@ -1,12 +1,9 @@
 """Example 1 at a small mesh: a regression of a few quantities, and parallel runs agreeing with serial."""
 
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT, by_cell, by_node
+from conftest import ROOT, by_cell, by_node, run_cli
 
 from solver.config import load
 from solver.io import TIMING_COLUMNS
@@ -44,14 +41,6 @@ def test_example1_regression(comm):
     assert all(r["newton_iterations"] == 1 for r in rows[1:])
 
 
-def _cli(args, nproc=1, cwd=ROOT):
-    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    cmd = [sys.executable, "-m", "solver", *args]
-    if nproc > 1:
-        cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
-    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=600)
-
-
 SCENES = {
     "example1": ["--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.05", "--set", "output.every=5"],
     "example2": ["--set", "time.k=0.05", "--set", "output.every=10"],
@@ -67,7 +56,7 @@ def serial_runs(tmp_path_factory):
     def get(scene):
         if scene not in cache:
             out = tmp_path_factory.mktemp(scene)
-            res = _cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(out / "r")])
+            res = run_cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(out / "r")])
             assert res.returncode == 0, res.stderr
             cache[scene] = out / "r"
         return cache[scene]
@@ -80,7 +69,7 @@ def serial_runs(tmp_path_factory):
 @pytest.mark.parametrize("scene", list(SCENES))
 def test_parallel_equals_serial(tmp_path, serial_runs, scene, nproc):
     """Fields at every written time and every CSV column agree with the serial run to 1e-8."""
-    par = _cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(tmp_path / "p")],
+    par = run_cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(tmp_path / "p")],
                nproc=nproc)
     assert par.returncode == 0, par.stderr
     a, b = read_results(serial_runs(scene)), read_results(tmp_path / "p")
@@ -103,7 +92,7 @@ def test_outputs_open_with_meshio(tmp_path):
     import meshio
 
     out = tmp_path / "r"
-    res = _cli(["run", "configs/example1.toml", "--set", "mesh.nx=4", "--set", "mesh.ny=4",
+    res = run_cli(["run", "configs/example1.toml", "--set", "mesh.nx=4", "--set", "mesh.ny=4",
                 "--set", "time.k=0.25", "--output", str(out), "--no-progress"])
     assert res.returncode == 0, res.stderr
     assert {p.name for p in out.iterdir()} == {"solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5"}

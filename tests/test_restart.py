@@ -3,12 +3,11 @@
 import os
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
 import pytest
-from conftest import ROOT, by_cell, by_node
+from conftest import ROOT, by_cell, by_node, mpi_env, solver_cmd
 
 from solver.io import TIMING_COLUMNS
 from solver.post import read_csv, read_results
@@ -18,15 +17,6 @@ pytestmark = pytest.mark.serial  # starts (and kills) its own processes
 SCENE = ["run", "configs/example1.toml", "--no-progress", "--set", "mesh.nx=48", "--set", "mesh.ny=48",
          "--set", "time.k=0.001", "--set", "output.every=50", "--set", "output.checkpoint_every=100"]
 STEPS = 1000
-
-
-def _cmd(args, nproc):
-    cmd = [sys.executable, "-m", "solver", *args]
-    return ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd] if nproc > 1 else cmd
-
-
-def _env():
-    return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
 
 
 def _rows(path):
@@ -39,11 +29,11 @@ def _rows(path):
 @pytest.mark.parametrize("nproc", [1, 2])
 def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
     full, cut = tmp_path / "full", tmp_path / "cut"
-    ref = subprocess.run(_cmd([*SCENE, "--output", str(full)], nproc), cwd=ROOT, env=_env(), capture_output=True,
+    ref = subprocess.run(solver_cmd([*SCENE, "--output", str(full)], nproc), cwd=ROOT, env=mpi_env(), capture_output=True,
                          text=True, timeout=600)
     assert ref.returncode == 0, ref.stderr[-3000:]
 
-    proc = subprocess.Popen(_cmd([*SCENE, "--output", str(cut)], nproc), cwd=ROOT, env=_env(),
+    proc = subprocess.Popen(solver_cmd([*SCENE, "--output", str(cut)], nproc), cwd=ROOT, env=mpi_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 300
     while _rows(cut / "timeseries.csv") < 430 and proc.poll() is None and time.time() < deadline:
@@ -55,7 +45,7 @@ def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
     # what the killed run left is readable
     assert read_results(cut)["times"][-1] >= 0.4 - 1e-12
 
-    res = subprocess.run(_cmd([*SCENE, "--output", str(cut), "--restart"], nproc), cwd=ROOT, env=_env(),
+    res = subprocess.run(solver_cmd([*SCENE, "--output", str(cut), "--restart"], nproc), cwd=ROOT, env=mpi_env(),
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
 
@@ -82,13 +72,13 @@ def test_restart_refuses_another_scene_and_accepts_other_ranks(tmp_path):
     out, full = tmp_path / "o", tmp_path / "full"
     args = ["run", "configs/example1.toml", "--no-progress", "--set", "mesh.nx=8", "--set", "mesh.ny=8",
             "--set", "time.k=0.1", "--set", "output.checkpoint_every=4"]
-    assert subprocess.run(_cmd([*args, "--output", str(full)], 1), cwd=ROOT, env=_env()).returncode == 0
-    assert subprocess.run(_cmd([*args, "--output", str(out)], 1), cwd=ROOT, env=_env()).returncode == 0
-    res = subprocess.run(_cmd([*args, "--output", str(out), "--set", "material.E=200", "--restart"], 1), cwd=ROOT,
-                         env=_env(), capture_output=True, text=True)
+    assert subprocess.run(solver_cmd([*args, "--output", str(full)], 1), cwd=ROOT, env=mpi_env()).returncode == 0
+    assert subprocess.run(solver_cmd([*args, "--output", str(out)], 1), cwd=ROOT, env=mpi_env()).returncode == 0
+    res = subprocess.run(solver_cmd([*args, "--output", str(out), "--set", "material.E=200", "--restart"], 1), cwd=ROOT,
+                         env=mpi_env(), capture_output=True, text=True)
     assert res.returncode == 2 and "the scene differs" in res.stderr
     # continue the finished run's last checkpoint (step 8) on 2 ranks: levels 9 and 10 again
-    res = subprocess.run(_cmd([*args, "--output", str(out), "--restart"], 2), cwd=ROOT, env=_env(),
+    res = subprocess.run(solver_cmd([*args, "--output", str(out), "--restart"], 2), cwd=ROOT, env=mpi_env(),
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-2000:]
     a, b = read_results(full), read_results(out)
