@@ -22,12 +22,12 @@ from .config import BoundaryConfig, MaterialConfig, SolverConfig
 from .contact import ContactTerm
 from .contact_points import ContactPoints
 from .diagnostics import DisplacementDiagnostics
-from .displacement import DisplacementProblem
+from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .fixed_point import FixedPointSolver, PenaltyDualitySolver
 from .geometry import Geometry
 from .memory import History
-from .newton import NewtonSolver, SolveInfo
+from .newton import NewtonSolver
 from .operators import Operators, clamped_conditions
 
 __all__ = ["Mechanics", "SolveInfo", "DisplacementSolveError"]

@@ -31,6 +31,7 @@ def test_incompatible_interval_refused_before_output(tmp_path):
     assert res.returncode == 2 and "boundary.bottom.interval" in res.stderr and not out.exists()
 
 
+@pytest.mark.slow
 def test_check_and_no_overwrite(tmp_path):
     res = cli(["check", "configs/example1.toml"])
     assert res.returncode == 0 and "ok" in res.stderr

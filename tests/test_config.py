@@ -1,11 +1,10 @@
 """Scenes: defaults are the paper's, overrides, round trip, traction tables, and rejections."""
 
-import tomllib
 
 import pytest
 from conftest import ROOT
 
-from solver.config import Config, ConfigError, apply_overrides, dumps, from_dict, load
+from solver.config import SECTIONS, Config, ConfigError, apply_overrides, dumps, from_dict, load, to_dict
 
 
 def test_defaults_are_example1():
@@ -120,4 +119,25 @@ def test_override_syntax():
     with pytest.raises(ConfigError, match="section.key"):
         apply_overrides({}, ["nx=3"])
     assert apply_overrides({}, ["mesh.diagonal=left"]) == {"mesh": {"diagonal": "left"}}
-    assert tomllib.loads("a = 1")  # the value syntax is TOML's
+    # values are TOML; a bare word is a string
+    assert apply_overrides({}, ["time.k=1e-3", "mesh.corners=[[0, 0], [2, 1]]", "solver.linear=mumps"]) == {
+        "time": {"k": 1e-3}, "mesh": {"corners": [[0, 0], [2, 1]]}, "solver": {"linear": "mumps"}}
+
+
+def test_errors_carry_the_key_value_and_what_is_allowed():
+    with pytest.raises(ConfigError) as err:
+        from_dict({"mesh": {"nx": 0}}, source="s.toml")
+    assert (err.value.source, err.value.key, err.value.value) == ("s.toml", "mesh.nx", 0)
+    assert err.value.allowed == "must be at least 1"
+    with pytest.raises(ConfigError) as err:
+        from_dict({"meshes": {}})
+    assert err.value.key == "meshes" and all(s.key in err.value.allowed for s in SECTIONS)
+
+
+def test_sections_registry_drives_parsing_and_writing():
+    cfg = from_dict({})
+    assert list(to_dict(cfg)) == [s.key for s in SECTIONS]
+    assert all(hasattr(cfg, s.attr) for s in SECTIONS)
+    with pytest.raises(ConfigError) as err:
+        from_dict({"material": {"model": "3d"}})  # the material section sees the mesh's dimension
+    assert err.value.key == "material.model"

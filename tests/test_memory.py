@@ -5,11 +5,12 @@ import math
 import numpy as np
 import pytest
 import ufl
-from conftest import unit_mesh
+from conftest import solve, unit_mesh
 from dolfinx import fem
 from mpi4py import MPI
 
-from solver.config import MemoryConfig
+from solver.config import MemoryConfig, from_dict
+from solver.errors import ConfigError
 from solver.material import elasticity, lame, strain
 from solver.memory import MemorySource, PronyHistory, QuadratureRule, TabulatedHistory, make_history, memory_source
 
@@ -121,3 +122,53 @@ def test_fast_source_equals_ufl_expression(comm, degree, damage):
         assert np.allclose(a, b, rtol=1e-13, atol=1e-12 * np.abs(b).max())
     raw = rule.evaluator(A(strain(u)), fast.Q)()
     assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > L
+
+
+def _patch(rule: str, k: float):
+    return from_dict({
+        "mesh": {"nx": 4, "ny": 3, "corners": [[0, 0], [2, 1]]},
+        "boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [10.0, 0.0]}},
+        "material": {"E": 100.0, "nu": 0.0},
+        "memory": {"kernel": "exponential", "weights": [-1.0], "times": [1.0], "L": 6.0, "rule": rule},
+        "damage": {"enabled": False, "zeta0": 0.8},
+        "time": {"T": 0.5, "k": k},
+    })
+
+
+def test_trapezoidal_memory_patch_closed_form(comm):
+    """Uniform stress t = E eps_n + P_n + (k/2) g(0) zeta0 min(L, E eps_n), P by the trapezoid
+    recursion (H_0 at weight k/2): the implicit current-level term, truncation acting."""
+    E, t, k, z0, L, c = 100.0, 10.0, 0.1, 0.8, 6.0, -1.0
+    model, rows = solve(_patch("trapezoid", k), comm)
+    d = math.exp(-k)
+    P, eps = 0.0, []
+    for n in range(len(rows)):
+        if n == 1:
+            P = d * 0.5 * k * c * z0 * min(L, E * eps[0])
+        elif n > 1:
+            P = d * (P + k * c * z0 * min(L, E * eps[-1]))
+        # E e + (k/2) c z0 min(L, E e) = t - P, piecewise linear in e
+        a = 0.5 * k * c * z0 if n > 0 else 0.0
+        e = (t - P) / (E + a * E)
+        if E * e > L:
+            e = (t - P - a * L) / E
+        eps.append(e)
+    x = model.u.function_space.tabulate_dof_coordinates()
+    ux = model.u.x.array.reshape(-1, 2)[:, 0]
+    sel = np.isclose(x[:, 0], 2.0)
+    got = comm.allreduce(float(ux[sel].max() / 2.0) if sel.any() else -np.inf, op=MPI.MAX)
+    assert got == pytest.approx(eps[-1], rel=1e-10)
+
+
+def test_trapezoid_is_more_accurate_in_time(comm):
+    """Final strain of the patch: the trapezoid at k = 0.1 is closer to a fine left-rule run than the left rule."""
+    def final(rule, k):
+        return solve(_patch(rule, k), comm)[1][-1]["strain_norm"]
+    fine = final("left", 0.005)
+    assert abs(final("trapezoid", 0.1) - fine) < 0.3 * abs(final("left", 0.1) - fine)
+
+
+def test_trapezoid_needs_newton():
+    with pytest.raises(ConfigError) as err:
+        from_dict({"memory": {"rule": "trapezoid"}, "solver": {"method": "penalty_duality"}})
+    assert err.value.key == "memory.rule"

@@ -32,6 +32,7 @@ def render(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", RENDER, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_paraview_renders_von_mises(results):
     png = results / "pv.png"
     res = render(str(results), "--field", "von_mises", "--output", str(png), "--size", "900", "600")
@@ -49,6 +50,7 @@ def test_paraview_renders_von_mises(results):
     assert np.unique(img.reshape(-1, img.shape[-1]), axis=0).shape[0] > 50  # a picture, not a blank
 
 
+@pytest.mark.slow
 def test_paraview_default_output_and_bad_field(results):
     res = render(str(results), "--time", "0.5", "--warp", "1")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]

@@ -26,6 +26,7 @@ def _rows(path):
         return 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("nproc", [1, 2])
 def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
     full, cut = tmp_path / "full", tmp_path / "cut"
@@ -67,6 +68,7 @@ def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
             assert y == pytest.approx(x, rel=1e-10, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_restart_refuses_another_scene_and_accepts_other_ranks(tmp_path):
     """Checkpoints are keyed by coordinates: a different scene is refused, another rank count continues."""
     out, full = tmp_path / "o", tmp_path / "full"
