@@ -101,12 +101,14 @@ class MemorySource:
     expression ``memory_source`` (tested), which remains the definition.
     """
 
-    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lam: float, mu: float, L: float) -> None:
+    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
+                 L: float) -> None:
         import scipy.sparse as sp
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
-        self.u, self.zeta, self.lam, self.mu, self.L, self.d = u, zeta, lam, mu, L, d
+        self.u, self.zeta, self.L, self.d = u, zeta, L, d
+        self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
         cells = rule.cells
         npts = rule.points.shape[0]
         rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
@@ -155,8 +157,8 @@ class MemorySource:
         e = flat.reshape(-1, self.d * self.d)
         diag = list(range(0, self.d * self.d, self.d + 1))
         tr = e[:, diag].sum(axis=1)
-        tr *= self.lam
-        e *= 2.0 * self.mu
+        tr *= self.lame_lambda
+        e *= 2.0 * self.lame_mu
         for i in diag:
             e[:, i] += tr
         np.clip(flat, -self.L, self.L, out=flat)

@@ -74,8 +74,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     mat = cfg.material
     history = None
     if cfg.memory.kernel != "none":
-        lam, mu = lame(mat.E, mat.nu, mat.model)
-        source = MemorySource(rule, u, zeta, lam, mu, cfg.memory.L)
+        lame_lambda, lame_mu = lame(mat.E, mat.nu, mat.model)
+        source = MemorySource(rule, u, zeta, lame_lambda, lame_mu, cfg.memory.L)
         history = make_history(cfg.memory, rule, source, k, steps)
     implicit = None
     if history is not None and cfg.memory.rule == "trapezoid":
