@@ -1,4 +1,4 @@
-"""Constitutive functions as pure UFL: elasticity A, truncation Phi_L, von Mises."""
+"""Constitutive functions as pure UFL (docs/model.md §2): elasticity A, truncation Phi_L, von Mises."""
 
 from __future__ import annotations
 
