@@ -69,7 +69,16 @@ class Damage:
         a = (z * xi + k_ * cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
         rhs = (self.zeta + k_ * phi) * xi * dx
         self.semi_implicit = scheme == "semi_implicit"
+        self.cnab2 = scheme == "cnab2"
         self.k = k
+        if self.cnab2:
+            # second order (docs/model.md §3.7): Crank-Nicolson diffusion, Adams-Bashforth-2 source
+            #   (z_n - z_{n-1}, xi) + k kappa/2 (grad(z_n + z_{n-1}), grad xi) = k (3/2 phi_{n-1} - 1/2 phi_{n-2}, xi)
+            # (the first step takes phi_0 alone: a local error O(k^2), once)
+            half = 0.5 * k_ * cfg.kappa
+            a = (z * xi + half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
+            rhs = (self.zeta * xi - half * ufl.inner(ufl.grad(self.zeta), ufl.grad(xi))) * ufl.dx
+            self.S = fem.form(phi * xi * dx)
         if self.semi_implicit:
             # phi(zeta_n) ~ phi(zeta_{n-1}) + phi_zeta (zeta_n - zeta_{n-1}), phi_zeta = lambda1 H(zeta - zeta*) / eta^2:
             # the matrix depends on zeta_{n-1} (assembled and factored every step) and loses
@@ -87,6 +96,24 @@ class Damage:
         self.x = self.b.duplicate()
         self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear, symmetric=not self.semi_implicit)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        if self.cnab2:
+            self.s = self.b.duplicate()  # (phi_{n-1}, xi)
+            self.s_prev = self.b.duplicate()  # (phi_{n-2}, xi)
+            self.have_prev = False
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Owned arrays a checkpoint must carry besides zeta (the previous source of the second-order step)."""
+        return {"source_prev": self.s_prev.array} if self.cnab2 else {}
+
+    def scalars(self) -> dict[str, float]:
+        return {"have_prev": float(self.have_prev)} if self.cnab2 else {}
+
+    def restore(self, name: str, values: np.ndarray) -> None:
+        {"source_prev": self.s_prev}[name].array[:] = values.ravel()
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        if self.cnab2:
+            self.have_prev = bool(scalars.get("have_prev", 0.0))
 
     def assemble_rhs(self) -> None:
         """(zeta_{n-1} + k phi(eps(u_{n-1}), zeta_{n-1}), xi)."""
@@ -94,6 +121,16 @@ class Damage:
             b.set(0.0)
         fpetsc.assemble_vector(self.b, self.L)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.cnab2:
+            with self.s.localForm() as s:
+                s.set(0.0)
+            fpetsc.assemble_vector(self.s, self.S)
+            self.s.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            if self.have_prev:
+                self.b.axpy(1.5 * self.k, self.s)
+                self.b.axpy(-0.5 * self.k, self.s_prev)
+            else:
+                self.b.axpy(self.k, self.s)
 
     def step(self) -> DamageStepInfo:
         """Advance zeta by one step using the current u and zeta (levels n-1)."""
@@ -120,6 +157,9 @@ class Damage:
             raise DamageSolveError(str(REASONS_KSP.get(reason, reason)))
         self.x.copy(self.zeta.vector)
         self.zeta.x.scatter_forward()
+        if self.cnab2:
+            self.s.copy(self.s_prev)
+            self.have_prev = True
         comm = self.V.mesh.comm
         owned = self.zeta.x.array[: self.nlocal]
         raw_min = comm.allreduce(float(owned.min()) if owned.size else np.inf, op=MPI.MIN)

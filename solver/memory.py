@@ -11,7 +11,10 @@ stored. Only a tabulated (general) kernel keeps every H_m.
 
 The history is committed once per step, after the step has converged. The trapezoidal
 rule (``memory.rule = "trapezoid"``) adds the current level's (k/2) g(0) H_n, implicit in
-u_n: :func:`trapezoid_term` gives that term of the displacement residual.
+u_n: :func:`trapezoid_term` gives that term of the displacement residual. With
+``trapezoid_extrapolated`` (the default of ``time.order = 2``) H_n is evaluated at
+u* = 2 u_{n-1} - u_{n-2} instead (:meth:`PronyHistory.set_current`): an O(k^3) change per
+level that keeps the Jacobian, and its factorization, independent of zeta_n.
 """
 
 from __future__ import annotations
@@ -176,6 +179,7 @@ class History:
     """Base: the memory tensor M (a quadrature function) and its update after a step."""
 
     M: fem.Function
+    extrapolated = False  # True: the current level's term is set by set_current() before the displacement solve
 
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
@@ -193,12 +197,16 @@ class History:
 class PronyHistory(History):
     """Prony series (constant kernel: one term with tau = inf), updated recursively."""
 
-    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False) -> None:
+    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False,
+                 extrapolated: bool = False) -> None:
         self.rule = rule
         self.M = fem.Function(source.Q, name="memory")
         self.H = source
-        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2
-        self.trapezoid = trapezoid
+        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2;
+        # implicit in u_n (trapezoid) or with H_n evaluated at an extrapolated u (extrapolated: P kept apart)
+        self.trapezoid = trapezoid or extrapolated
+        self.extrapolated = extrapolated
+        self.P = np.zeros_like(self.M.x.array) if extrapolated else None
         self.g0 = float(np.sum(weights))
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
@@ -212,22 +220,30 @@ class PronyHistory(History):
         if self.trapezoid and n == 0:
             h *= 0.5
         if self.terms is None:
-            m = self.M.x.array
+            m = self.P if self.extrapolated else self.M.x.array
             m += (self.k * self.weights[0]) * h
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
             return
-        total = self.M.x.array
+        total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
         for term, c, e in zip(self.terms, self.weights, self.decay):
             term += (self.k * c) * h
             term *= e
             total += term
 
+    def set_current(self, h: np.ndarray) -> None:
+        """M_n = P_n + (k/2) g(0) h, with h = H at the extrapolated level n (``extrapolated`` only)."""
+        np.multiply(h, 0.5 * self.k * self.g0, out=self.M.x.array)
+        self.M.x.array[:] += self.P
+
     def state(self) -> dict[str, np.ndarray]:
-        if self.terms is None:
-            return {"M": self.M.x.array}
-        return {"M": self.M.x.array, **{f"M{i}": t for i, t in enumerate(self.terms)}}
+        out = {"M": self.M.x.array}
+        if self.P is not None:
+            out["P"] = self.P
+        if self.terms is not None:
+            out.update({f"M{i}": t for i, t in enumerate(self.terms)})
+        return out
 
 
 class TabulatedHistory(History):
@@ -269,7 +285,8 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):
-        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid")
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid",
+                            extrapolated=cfg.rule == "trapezoid_extrapolated")
     return TabulatedHistory(rule, source, cfg.table, k, steps)
 
 

@@ -2,7 +2,9 @@
 
 XDMF cannot hold quadrature functions, so the stresses sigma = A eps(u) + M and A eps(u)
 are written as DG0 cell averages (the exact L2 projection onto piecewise constants),
-with their von Mises values.
+with their von Mises values. P2 fields (``discretization.u_degree`` or ``zeta_degree`` = 2)
+are written as their P1 interpolants on the mesh (their values at the vertices): ParaView
+shows the vertex values exactly, never a field the solver did not compute.
 """
 
 from __future__ import annotations
@@ -35,12 +37,28 @@ class Outputs:
         self.avg_el = CellAverage(sig_el, self.elastic_stress, model.rule.dx)
         self.avg = CellAverage(sig, self.stress, model.rule.dx)
         self.xdmf = None
+        self._p1: list[tuple[fem.Function, fem.Function]] = []  # (solver field, its P1 interpolant)
         if outdir is not None:
             zeta = [model.damage.zeta] if model.damage is not None else []
-            funcs = [model.u, *zeta, self.stress, self.elastic_stress, self.von_mises, self.von_mises_elastic]
+            written = [self._vertex_values(f) for f in (model.u, *zeta)]
+            funcs = [*written, self.stress, self.elastic_stress, self.von_mises, self.von_mises_elastic]
             self.xdmf = XDMFWriter(outdir, mesh, funcs, part=part, prefix=prefix)
 
+    def _vertex_values(self, f: fem.Function) -> fem.Function:
+        """f itself if P1, else a P1 function of the same name that takes f's vertex values at each write."""
+        if f.function_space.ufl_element().degree() == 1:
+            return f
+        el = f.function_space.ufl_element()
+        mesh = f.function_space.mesh
+        V1 = (fem.VectorFunctionSpace(mesh, ("CG", 1), dim=el.value_shape()[0]) if el.value_shape()
+              else fem.FunctionSpace(mesh, ("CG", 1)))
+        out = fem.Function(V1, name=f.name)
+        self._p1.append((f, out))
+        return out
+
     def update_cell_fields(self) -> None:
+        for f, out in self._p1:
+            out.interpolate(f)
         self.avg_el.update()
         self.avg.update()
         n = self.von_mises.function_space.dofmap.index_map.size_local

@@ -49,6 +49,7 @@ class Model:
     history: History | None
     rule: QuadratureRule
     mech: Mechanics
+    u_prev: fem.Function | None = None  # u_{n-1} while level n is solved (time.order = 2: the extrapolation)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -59,14 +60,16 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     """Mesh, spaces and the physics terms the scene switches on."""
     geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
     mesh = geo.mesh
-    V = fem.VectorFunctionSpace(mesh, ("CG", 1))
+    disc = cfg.discretization
+    V = fem.VectorFunctionSpace(mesh, ("CG", disc.u_degree))
     u = fem.Function(V, name="displacement")
     k, steps = cfg.time.k, cfg.time.steps
     damage = None
     if cfg.damage.enabled:
-        Z = fem.FunctionSpace(mesh, ("CG", 1))
+        Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
+        scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
         damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        cfg.solver.linear, cfg.solver.damage_scheme)
+                        cfg.solver.linear, scheme)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
@@ -81,7 +84,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     if history is not None and cfg.memory.rule == "trapezoid":
         implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
     mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit)
-    return Model(cfg, geo, u, zeta, damage, history, rule, mech)
+    u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev)
 
 
 class Stepper:
@@ -104,6 +108,8 @@ class Stepper:
             if n > 0 and model.damage is not None:
                 dinfo = model.damage.step()
                 clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+            if n > 0 and model.u_prev is not None:
+                self._extrapolated_memory(n)
             t2 = time.perf_counter()
             info = model.mech.solve(t)
             self._check_finite()
@@ -123,6 +129,18 @@ class Stepper:
         row.update({"time_memory": t1 - t0, "time_damage": t2 - t1, "time_displacement": t3 - t2,
                     "time_diagnostics": t4 - t3})
         return row
+
+    def _extrapolated_memory(self, n: int) -> None:
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); u keeps u_{n-1}."""
+        model = self.model
+        u, u_prev = model.u.x.array, model.u_prev.x.array
+        last = u.copy()
+        if n >= 2:
+            u *= 2.0
+            u -= u_prev
+        model.history.set_current(model.history.H())
+        u[:] = last
+        u_prev[:] = last
 
     def _check_finite(self) -> None:
         model = self.model

@@ -10,6 +10,7 @@ computation starts. See :mod:`solver.config.scene` for how sections are register
 from ..errors import ConfigError
 from .boundary import PAPER_BOUNDARIES, ROLES, SIDES, BoundaryConfig, table_at
 from .damage import DamageConfig
+from .discretization import DiscretizationConfig
 from .material import MODELS, MaterialConfig
 from .memory import KERNELS, MemoryConfig
 from .mesh import DIAGONALS, MAX_CELLS, MeshConfig
@@ -19,7 +20,7 @@ from .solver import DAMAGE_SCHEMES, METHODS, SolverConfig
 from .time import TimeConfig
 
 __all__ = [
-    "BoundaryConfig", "Config", "ConfigError", "DamageConfig", "MaterialConfig", "MemoryConfig", "MeshConfig",
+    "BoundaryConfig", "Config", "ConfigError", "DamageConfig", "DiscretizationConfig", "MaterialConfig", "MemoryConfig", "MeshConfig",
     "OutputConfig", "SolverConfig", "TimeConfig", "SECTIONS", "PAPER_BOUNDARIES", "ROLES", "SIDES", "MODELS",
     "KERNELS", "DIAGONALS", "MAX_CELLS", "METHODS", "DAMAGE_SCHEMES", "apply_overrides", "dumps", "from_dict",
     "load", "parse_override", "to_dict", "table_at",

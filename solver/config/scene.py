@@ -17,9 +17,10 @@ from typing import Any, NamedTuple
 import tomlkit
 
 from ..errors import ConfigError
-from . import boundary, damage, material, memory, mesh, output, solver, time
+from . import boundary, damage, discretization, material, memory, mesh, output, solver, time
 from .boundary import BoundaryConfig
 from .damage import DamageConfig
+from .discretization import DiscretizationConfig
 from .fields import Ctx
 from .material import MaterialConfig
 from .memory import MemoryConfig
@@ -43,9 +44,10 @@ SECTIONS: tuple[Section, ...] = (
     Section("mesh", "mesh", mesh.parse, mesh.to_toml, {}),
     Section("boundary", "boundaries", boundary.parse, boundary.to_toml, None),
     Section("material", "material", material.parse, material.to_toml, {}),
+    Section("discretization", "discretization", discretization.parse, discretization.to_toml, {}),
+    Section("time", "time", time.parse, time.to_toml, {}),
     Section("memory", "memory", memory.parse, memory.to_toml, {}),
     Section("damage", "damage", damage.parse, damage.to_toml, {}),
-    Section("time", "time", time.parse, time.to_toml, {}),
     Section("solver", "solver", solver.parse, solver.to_toml, {}),
     Section("output", "output", output.parse, output.to_toml, {}),
 )
@@ -58,6 +60,7 @@ class Config:
     mesh: MeshConfig = field(default_factory=MeshConfig)
     boundaries: tuple[BoundaryConfig, ...] = ()
     material: MaterialConfig = field(default_factory=MaterialConfig)
+    discretization: DiscretizationConfig = field(default_factory=DiscretizationConfig)
     memory: MemoryConfig = field(default_factory=MemoryConfig)
     damage: DamageConfig = field(default_factory=DamageConfig)
     time: TimeConfig = field(default_factory=TimeConfig)
