@@ -52,8 +52,7 @@ class Mechanics:
         self.ops = Operators(geo, arguments, material, bcs, tractions, history, pattern_extra=pattern)
         self.problem = DisplacementProblem(u, self.ops, self.contact, implicit_term)
         # the contact term at its points (2-D): the fixed-point methods and the penetration diagnostic
-        p1 = u.function_space.ufl_element().degree() == 1
-        points = ContactPoints(geo, u.function_space, parts, deg) if parts and geo.dim == 2 and p1 else None
+        points = ContactPoints(geo, u.function_space, parts, deg) if parts and geo.dim == 2 else None
         self.method = settings.method if parts else "newton"
         if self.method == "newton":
             self.solver = NewtonSolver(self.problem, settings, geo.comm)

@@ -26,15 +26,22 @@ def _rows(path):
         return 0
 
 
+SECOND_ORDER = ["--set", "discretization.u_degree=2", "--set", "time.order=2", "--set", "mesh.nx=24",
+                "--set", "mesh.ny=24"]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("nproc", [1, 2])
-def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
+@pytest.mark.parametrize("nproc,extra", [(1, []), (2, []), (1, SECOND_ORDER)], ids=["P1", "P1-2ranks", "P2-order2"])
+def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc, extra):
+    """The second-order scheme carries more state (u_{n-1}, the previous damage source, the memory's partial
+    sum): the restart must reproduce it too."""
     full, cut = tmp_path / "full", tmp_path / "cut"
-    ref = subprocess.run(solver_cmd([*SCENE, "--output", str(full)], nproc), cwd=ROOT, env=mpi_env(), capture_output=True,
+    scene = [*SCENE, *extra]
+    ref = subprocess.run(solver_cmd([*scene, "--output", str(full)], nproc), cwd=ROOT, env=mpi_env(), capture_output=True,
                          text=True, timeout=600)
     assert ref.returncode == 0, ref.stderr[-3000:]
 
-    proc = subprocess.Popen(solver_cmd([*SCENE, "--output", str(cut)], nproc), cwd=ROOT, env=mpi_env(),
+    proc = subprocess.Popen(solver_cmd([*scene, "--output", str(cut)], nproc), cwd=ROOT, env=mpi_env(),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 300
     while _rows(cut / "timeseries.csv") < 430 and proc.poll() is None and time.time() < deadline:
@@ -46,7 +53,7 @@ def test_kill_and_restart_equals_uninterrupted(tmp_path, nproc):
     # what the killed run left is readable
     assert read_results(cut)["times"][-1] >= 0.4 - 1e-12
 
-    res = subprocess.run(solver_cmd([*SCENE, "--output", str(cut), "--restart"], nproc), cwd=ROOT, env=mpi_env(),
+    res = subprocess.run(solver_cmd([*scene, "--output", str(cut), "--restart"], nproc), cwd=ROOT, env=mpi_env(),
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
 

@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
-from conftest import solve
+from conftest import ROOT, solve
 
 from solver.config import from_dict
 from solver.errors import DisplacementSolveError
-from solver.stepper import Stepper, _csv_lines_until, build_model, writes_level
+from solver.stepper import Stepper, _csv_lines_until, build_model, run, writes_level
 
 SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.3, "k": 0.1}}
 
@@ -59,3 +59,48 @@ def test_csv_lines_until_keeps_complete_rows_up_to_a_step(tmp_path):
     assert _csv_lines_until(path, 1) == ["0,0.0\n", "1,0.1\n"]
     assert _csv_lines_until(path, 9) == ["0,0.0\n", "1,0.1\n", "2,0.2\n"]
     assert _csv_lines_until(tmp_path / "none.csv", 3) == []
+
+
+def _paper_norm_errors(comm, order: int, ks, k_ref: float) -> list[float]:
+    """max over levels of ||eps(u - u_ref)|| + ||zeta - zeta_ref|| on Example 1 at n = 8 (the same mesh: time error only)."""
+    import dolfinx.fem.petsc  # noqa: F401
+    import ufl
+    from dolfinx import fem
+    from mpi4py import MPI
+
+    from solver.config import load
+
+    def levels(k):
+        cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=8", "mesh.ny=8", f"time.order={order}", f"time.k={k}"])
+        model = build_model(cfg, comm)
+        out = {}
+        run(model, on_step=lambda r: out.__setitem__(round(r["t"], 9), (model.u.x.array.copy(),
+                                                                        model.damage.zeta.x.array.copy())))
+        return model, out
+
+    model, ref = levels(k_ref)
+    V, Z = model.u.function_space, model.damage.V
+    err_u = fem.Function(V)
+    err_z = fem.Function(Z)
+    e = ufl.sym(ufl.grad(err_u))
+    forms = fem.form(ufl.inner(e, e) * ufl.dx), fem.form(err_z * err_z * ufl.dx)
+    out = []
+    for k in ks:
+        _, sol = levels(k)
+        worst = 0.0
+        for t, (u, z) in sol.items():
+            err_u.x.array[:] = u - ref[t][0]
+            err_z.x.array[:] = z - ref[t][1]
+            a, b = (np.sqrt(comm.allreduce(fem.assemble_scalar(f), op=MPI.SUM)) for f in forms)
+            worst = max(worst, a + b)
+        out.append(worst)
+    return out
+
+
+@pytest.mark.parametrize("order,low,high", [(1, 0.9, 1.3), (2, 1.8, 2.2)])
+def test_observed_order_in_k(comm, order, low, high):
+    """Against the same scheme at k/64 on the same mesh: order 1 stays first order, order 2 is second order."""
+    ks = [0.1, 0.05, 0.025]
+    errs = _paper_norm_errors(comm, order, ks, 0.1 / 64)
+    rates = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
+    assert all(low <= r <= high for r in rates), (errs, rates)

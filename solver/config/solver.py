@@ -57,8 +57,6 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
     if scene["memory"].rule == "trapezoid" and method != "newton" and has_contact:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
-    if method != "newton" and has_contact and disc.u_degree != 1:
-        raise ctx.fail("solver.method", method, "works on P1 contact points; use 'newton' with discretization.u_degree = 2")
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:
         raise ctx.fail("solver.damage_scheme", damage_scheme, "is first order; time.order = 2 uses its own damage step")
     return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs,
