@@ -26,6 +26,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE1 = ROOT / "configs" / "example1.toml"
+# discretization variants of the constant-kernel case: "<space>-order<k>" (P2 at n has the dofs of P1 at 2n)
+VARIANTS = {"p1-order2": ["time.order=2"], "p2-order1": ["discretization.u_degree=2"],
+            "p2-order2": ["discretization.u_degree=2", "time.order=2"]}
 PHASES = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output")
 
 
@@ -52,6 +55,7 @@ def run_case(n: int, k: float, T: float, kernel: str = "constant") -> dict:
     sets = [f"mesh.nx={n}", f"mesh.ny={n}", f"time.k={k}", f"time.T={T}", "output.xdmf=false"]
     if kernel == "exponential":
         sets += ["memory.kernel='exponential'", "memory.weights=[-1.0]", "memory.times=[1.0]"]
+    sets += VARIANTS.get(kernel, [])
     cfg = load(EXAMPLE1, sets)
     t0 = time.perf_counter()
     model = build_model(cfg, comm)
@@ -131,6 +135,16 @@ def _table(results: dict) -> str:
                 f"- total {ref['build_s'] + ref['run_s']:.1f} s (set-up {ref['build_s']:.1f} s, level 0 "
                 f"{ref['level0_s']:.1f} s, {ref['step_ms']:.1f} ms per step, step / floor {ref['ratio']:.2f}); "
                 f"peak memory {ref['peak_mib_max']:.0f} MiB", ""]
+    disc = results.get("discretizations", [])
+    if disc:
+        out += ["## Discretizations (Example 1, k = 0.01, 100 steps, one process)", "",
+                "| case | n | u dofs | step (ms) | damage | memory | displacement | floor (ms) | step / floor |",
+                "|---|---|---|---|---|---|---|---|---|"]
+        for c in disc:
+            s = c["split_ms"]
+            out.append(f"| {c['kernel']} | {c['n']} | {c['dofs_u']} | {c['step_ms']:.2f} | {s['damage']:.2f} "
+                       f"| {s['memory']:.2f} | {s['displacement']:.2f} | {c['floor_ms']['total']:.2f} | {c['ratio']:.2f} |")
+        out.append("")
     mem = results.get("memory_flat", [])
     if mem:
         out += ["## Memory against the number of steps", "", "| kernel | n | steps | peak MiB |", "|---|---|---|---|"]
@@ -145,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256])
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
     p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference run")
+    p.add_argument("--no-discretizations", action="store_true", help="skip the P2 / second-order cases")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
     args = p.parse_args(argv)
     out = Path(args.output)
@@ -164,6 +179,12 @@ def main(argv: list[str] | None = None) -> int:
                                      "speedup": c["step_ms"] / q["step_ms"], "max_diff": diff}
             print(f"n={n:4d} {args.nproc} ranks: {q['step_ms']:7.2f} ms/step, speed-up "
                   f"{c['step_ms'] / q['step_ms']:.2f}, max difference {diff:.1e}", flush=True)
+    if not args.no_discretizations:  # P1 at n = 128 and P2 at n = 64 have the same displacement dofs
+        for variant, n in (("constant", 128), ("p1-order2", 128), ("p2-order1", 64), ("p2-order2", 64)):
+            c = _spawn(n, 0.01, 1.0, variant, 1)
+            results.setdefault("discretizations", []).append(c)
+            print(f"{variant:10s} n={n:4d}: {c['step_ms']:7.2f} ms/step, floor {c['floor_ms']['total']:6.2f} ms, "
+                  f"ratio {c['ratio']:.2f}", flush=True)
     if not args.no_reference:
         ref = _spawn(256, 0.0005, 1.0, "constant", 1)
         results["reference"] = ref

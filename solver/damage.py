@@ -77,8 +77,9 @@ class Damage:
             # (the first step takes phi_0 alone: a local error O(k^2), once)
             half = 0.5 * k_ * cfg.kappa
             a = (z * xi + half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
-            rhs = (self.zeta * xi - half * ufl.inner(ufl.grad(self.zeta), ufl.grad(xi))) * ufl.dx
-            self.S = fem.form(phi * xi * dx)
+            rhs = phi * xi * dx  # the source, assembled each step; the rest is the matrix B zeta_{n-1}
+            self.B = fpetsc.assemble_matrix(fem.form((z * xi - half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx))
+            self.B.assemble()
         if self.semi_implicit:
             # phi(zeta_n) ~ phi(zeta_{n-1}) + phi_zeta (zeta_n - zeta_{n-1}), phi_zeta = lambda1 H(zeta - zeta*) / eta^2:
             # the matrix depends on zeta_{n-1} (assembled and factored every step) and loses
@@ -100,6 +101,7 @@ class Damage:
             self.s = self.b.duplicate()  # (phi_{n-1}, xi)
             self.s_prev = self.b.duplicate()  # (phi_{n-2}, xi)
             self.have_prev = False
+            self._Bz = self.b.duplicate()
 
     def state(self) -> dict[str, np.ndarray]:
         """Owned arrays a checkpoint must carry besides zeta (the previous source of the second-order step)."""
@@ -121,16 +123,13 @@ class Damage:
             b.set(0.0)
         fpetsc.assemble_vector(self.b, self.L)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        if self.cnab2:
-            with self.s.localForm() as s:
-                s.set(0.0)
-            fpetsc.assemble_vector(self.s, self.S)
-            self.s.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.cnab2:  # b = B zeta_{n-1} + k (3/2 s_{n-1} - 1/2 s_{n-2}), with s = (phi, xi) just assembled into b
+            self.b.copy(self.s)
+            self.B.mult(self.zeta.vector, self._Bz)
+            self.b.scale(1.5 * self.k if self.have_prev else self.k)
             if self.have_prev:
-                self.b.axpy(1.5 * self.k, self.s)
                 self.b.axpy(-0.5 * self.k, self.s_prev)
-            else:
-                self.b.axpy(self.k, self.s)
+            self.b.axpy(1.0, self._Bz)
 
     def step(self) -> DamageStepInfo:
         """Advance zeta by one step using the current u and zeta (levels n-1)."""

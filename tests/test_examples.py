@@ -30,7 +30,11 @@ SCENES = {
     "example1": ["--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.05", "--set", "output.every=5"],
     "example2": ["--set", "time.k=0.05", "--set", "output.every=10"],
     "example3": ["--set", "time.k=0.05", "--set", "output.every=5"],
+    # P2 and the second-order scheme (the file is example1's)
+    "example1_p2_order2": ["--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.05", "--set", "output.every=5",
+                           "--set", "discretization.u_degree=2", "--set", "time.order=2"],
 }
+FILES = {"example1_p2_order2": "example1"}
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +45,8 @@ def serial_runs(tmp_path_factory):
     def get(scene):
         if scene not in cache:
             out = tmp_path_factory.mktemp(scene)
-            res = run_cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(out / "r")])
+            res = run_cli(["run", f"configs/{FILES.get(scene, scene)}.toml", *SCENES[scene], "--no-progress",
+                           "--output", str(out / "r")])
             assert res.returncode == 0, res.stderr
             cache[scene] = out / "r"
         return cache[scene]
@@ -55,7 +60,7 @@ def serial_runs(tmp_path_factory):
 @pytest.mark.parametrize("scene", list(SCENES))
 def test_parallel_equals_serial(tmp_path, serial_runs, scene, nproc):
     """Fields at every written time and every CSV column agree with the serial run to 1e-8."""
-    par = run_cli(["run", f"configs/{scene}.toml", *SCENES[scene], "--no-progress", "--output", str(tmp_path / "p")],
+    par = run_cli(["run", f"configs/{FILES.get(scene, scene)}.toml", *SCENES[scene], "--no-progress", "--output", str(tmp_path / "p")],
                nproc=nproc)
     assert par.returncode == 0, par.stderr
     a, b = read_results(serial_runs(scene)), read_results(tmp_path / "p")
