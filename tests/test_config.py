@@ -141,3 +141,27 @@ def test_sections_registry_drives_parsing_and_writing():
     with pytest.raises(ConfigError) as err:
         from_dict({"material": {"model": "3d"}})  # the material section sees the mesh's dimension
     assert err.value.key == "material.model"
+
+
+@pytest.mark.parametrize("data,key", [
+    ({"discretization": {"u_degree": 3}}, "discretization.u_degree"),
+    ({"discretization": {"zeta_degree": 0}}, "discretization.zeta_degree"),
+    ({"time": {"order": 3}}, "time.order"),
+    ({"time": {"order": 2}, "memory": {"kernel": "tabulated", "table": [[0, 1], [1, 1]]}}, "memory.kernel"),
+    ({"time": {"order": 2}, "memory": {"rule": "left"}}, "memory.rule"),
+    ({"time": {"order": 2}, "solver": {"damage_scheme": "semi_implicit"}}, "solver.damage_scheme"),
+])
+def test_discretization_and_order_are_validated(data, key):
+    with pytest.raises(ConfigError) as err:
+        from_dict(data)
+    assert err.value.key == key
+
+
+def test_degrees_choose_the_quadrature_and_the_order_chooses_the_memory_rule():
+    p1 = from_dict({})
+    assert (p1.solver.quadrature_degree, p1.solver.contact_quadrature_degree, p1.memory.rule) == (1, 2, "left")
+    p2 = from_dict({"discretization": {"u_degree": 2}, "time": {"order": 2}})
+    assert (p2.solver.quadrature_degree, p2.solver.contact_quadrature_degree) == (3, 4)
+    assert p2.memory.rule == "trapezoid_extrapolated"
+    mine = from_dict({"discretization": {"u_degree": 2}, "solver": {"quadrature_degree": 5}})
+    assert mine.solver.quadrature_degree == 5  # an explicit setting wins
