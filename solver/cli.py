@@ -129,7 +129,9 @@ def cmd_check(args, comm: MPI.Comm) -> int:
         physics.append(f"memory({cfg.memory.kernel})")
     if cfg.damage.enabled:
         physics.append("damage")
-    log.info("%s: ok — %s, %d steps of k = %g", args.config, " + ".join(physics), cfg.time.steps, cfg.time.k)
+    disc = cfg.discretization
+    log.info("%s: ok — %s; u P%d, zeta P%d, %d steps of k = %g (order %d)", args.config, " + ".join(physics),
+             disc.u_degree, disc.zeta_degree, cfg.time.steps, cfg.time.k, cfg.time.order)
     return 0
 
 

@@ -149,16 +149,40 @@ class Damage:
             self.A.zeroEntries()
             fpetsc.assemble_matrix(self.A, self.a)
             self.A.assemble()
+        if self.cnab2 and not self.have_prev:
+            self._zeta0 = self.zeta.vector.copy()  # the first step is corrected later (correct_first_step)
         self.assemble_rhs()
+        self._solve()
+        if self.cnab2:
+            self.s.copy(self.s_prev)
+            self.have_prev = True
+        return self._clip()
+
+    def correct_first_step(self) -> DamageStepInfo:
+        """Heun's corrector for the second-order scheme's first step, after u_1 was predicted:
+        (z_1 - z_0, xi) + k kappa/2 (grad(z_1 + z_0), grad xi) = k/2 (phi_0 + phi(u_1, z_1^pred), xi).
+        AB2 has no phi_{-1}; the predictor alone would leave a local O(k^2) error at t_1."""
+        with self.s.localForm() as s:
+            s.set(0.0)
+        fpetsc.assemble_vector(self.s, self.L)  # phi at (u_1 predicted, zeta_1 predicted)
+        self.s.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.B.mult(self._zeta0, self.b)
+        self.b.axpy(0.5 * self.k, self.s)
+        self.b.axpy(0.5 * self.k, self.s_prev)  # s_prev holds phi_0 (and keeps it for the next step's AB2)
+        self._solve()
+        self._zeta0 = None
+        return self._clip()
+
+    def _solve(self) -> None:
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise DamageSolveError(str(REASONS_KSP.get(reason, reason)))
         self.x.copy(self.zeta.vector)
         self.zeta.x.scatter_forward()
-        if self.cnab2:
-            self.s.copy(self.s_prev)
-            self.have_prev = True
+
+    def _clip(self) -> DamageStepInfo:
+        """Clip to [zeta*, 1] if the scene asks; report the range before clipping and the nodes clipped."""
         comm = self.V.mesh.comm
         owned = self.zeta.x.array[: self.nlocal]
         raw_min = comm.allreduce(float(owned.min()) if owned.size else np.inf, op=MPI.MIN)

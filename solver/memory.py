@@ -207,6 +207,8 @@ class PronyHistory(History):
         self.trapezoid = trapezoid or extrapolated
         self.extrapolated = extrapolated
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
+        # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
+        self.current_weight: fem.Constant | None = None
         self.g0 = float(np.sum(weights))
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
@@ -219,6 +221,8 @@ class PronyHistory(History):
         h = self.H()
         if self.trapezoid and n == 0:
             h *= 0.5
+        if self.current_weight is not None:
+            self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
             m += (self.k * self.weights[0]) * h
@@ -295,10 +299,12 @@ def trapezoid_term(history: PronyHistory, zeta, A, L: float):
     from .material import strain
 
     rule = history.rule
+    # a constant, not a number: not compiled into the form, and 0 at level 0, where M_0 = 0 (the history's commit
+    # sets it to (k/2) g(0) from level 1 on)
+    history.current_weight = fem.Constant(rule.mesh, PETSc.ScalarType(0.0))
 
     def term(u, w):
         H = memory_source(u, zeta, A, L)
-        half_k_g0 = fem.Constant(rule.mesh, PETSc.ScalarType(0.5 * history.k * history.g0))  # not compiled into the form
-        return half_k_g0 * ufl.inner(H, strain(w)) * rule.dx
+        return history.current_weight * ufl.inner(H, strain(w)) * rule.dx
 
     return term

@@ -95,6 +95,9 @@ class Stepper:
         self.model = model
         self.k = model.cfg.time.k
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
+        # the second-order scheme starts with one predictor-corrector step (Heun): AB2 and the extrapolation
+        # need two past levels
+        self.heun_start = model.cfg.time.order == 2 and (model.damage is not None or model.u_prev is not None)
 
     def step(self, n: int) -> dict:
         """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""
@@ -112,6 +115,17 @@ class Stepper:
                 self._extrapolated_memory(n)
             t2 = time.perf_counter()
             info = model.mech.solve(t)
+            if n == 1 and self.heun_start:  # correct zeta_1 and M_1 with the predicted u_1, then solve again
+                if model.damage is not None:
+                    dinfo = model.damage.correct_first_step()
+                    clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+                if model.u_prev is not None:
+                    model.history.set_current(model.history.H())
+                again = model.mech.solve(t)
+                again.iterations += info.iterations
+                again.linear_solves += info.linear_solves
+                again.factorizations += info.factorizations
+                info = again
             self._check_finite()
         except SolveFailure as exc:
             raise exc.at(n, t) from None

@@ -172,3 +172,20 @@ def test_trapezoid_needs_newton():
     with pytest.raises(ConfigError) as err:
         from_dict({"memory": {"rule": "trapezoid"}, "solver": {"method": "penalty_duality"}})
     assert err.value.key == "memory.rule"
+
+
+@pytest.mark.parametrize("rule", ["trapezoid", "trapezoid_extrapolated"])
+def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
+    """M_0 = 0: level 0 does not depend on the rule or on k (the implicit trapezoid once added its term there)."""
+    from conftest import ROOT
+
+    from solver.config import load
+    from solver.stepper import Stepper, build_model
+
+    def level0(r, k):
+        model = build_model(load(ROOT / "configs/example1.toml", ["mesh.nx=4", "mesh.ny=4", f"time.k={k}",
+                                                                  f"memory.rule='{r}'"]), comm)
+        return Stepper(model).step(0)["strain_norm"]
+
+    assert level0(rule, 0.1) == pytest.approx(level0("left", 0.1), rel=1e-12)
+    assert level0(rule, 0.05) == pytest.approx(level0("left", 0.1), rel=1e-12)
