@@ -58,6 +58,18 @@ def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
     return P
 
 
+def scheme_fingerprint() -> str:
+    """A hash of the solver's physics sources: a cached solution is reused only by the code that computed it."""
+    here = Path(__file__).resolve().parent
+    skip = {"bench.py", "study.py", "plots.py", "paraview.py", "paraview_script.py", "post.py", "cli.py",
+            "discretizations.py", "reference.py", "convergence.py"}
+    h = hashlib.sha256()
+    for path in sorted(here.rglob("*.py")):
+        if path.name not in skip:
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def _petsc_to_scipy(A) -> sp.csr_matrix:
     ai, aj, av = A.getValuesCSR()
     return sp.csr_matrix((av, aj, ai), shape=A.getSize())
@@ -82,7 +94,7 @@ class FineReference:
         self.model = model
         V, Z = model.u.function_space, model.damage.V
         self.nu, self.nz = model.u.x.array.size, model.damage.zeta.x.array.size
-        key = hashlib.sha256(dumps(cfg).split("\n", 1)[1].encode()).hexdigest()[:16]
+        key = hashlib.sha256((dumps(cfg).split("\n", 1)[1] + scheme_fingerprint()).encode()).hexdigest()[:16]
         cache.mkdir(parents=True, exist_ok=True)
         path = cache / f"fine-reference-{n}-{k}-{key}.npy"
         self.cached = path.exists()
