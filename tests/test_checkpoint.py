@@ -37,7 +37,12 @@ def test_round_trip_restores_every_field(comm, shared_tmp):
     assert (ck.step, ck.t, ck.part) == (1, pytest.approx(0.1), 1)
     assert np.array_equal(fresh.u.x.array, saved["u"])  # same partition here: same order
     assert np.array_equal(fresh.damage.zeta.x.array, saved["zeta"])
-    assert np.array_equal(fresh.history.M.x.array, saved["M"])
+    # owned quadrature values exactly; ghost-cell values are computed locally during a run (round-off from the
+    # owner's, in another summation order) and read from their owner after a restart
+    Q = model.history.M.function_space
+    owned = Q.dofmap.index_map.size_local * Q.dofmap.index_map_bs
+    assert np.array_equal(fresh.history.M.x.array[:owned], saved["M"][:owned])
+    assert np.allclose(fresh.history.M.x.array, saved["M"], rtol=0, atol=1e-14 * np.abs(saved["M"]).max())
     assert fresh.mech.problem.carried
 
 
