@@ -7,7 +7,7 @@
 
 SHELL := /bin/bash
 PY := .venv/bin/python
-APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-scipy python3-matplotlib python3-venv python3-pip openmpi-bin libegl1 libegl-mesa0
+APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-tomlkit python3-scipy python3-matplotlib python3-venv python3-pip openmpi-bin libegl1 libegl-mesa0
 export OMPI_ALLOW_RUN_AS_ROOT := 1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMPI_MCA_rmaps_base_oversubscribe := 1

@@ -4,10 +4,11 @@ Every value is stored against the physical coordinates of its dof (mesh nodes fo
 P1 fields, quadrature points for the history), gathered from the owned dofs of all
 ranks and sorted. A restart looks its own dofs up by coordinates, so it does not depend
 on the partition (which is not reproducible from one parallel launch to the next) nor on
-the number of ranks. Stored: u, zeta, every history array, the displacement solver's
-carried vectors (so the first step after a restart does the same arithmetic), the step,
-and a hash of the scene (output settings excluded) so that a restart cannot silently
-continue another problem. Rank 0 writes with h5py to a temporary name and renames.
+the number of ranks. Stored: u, zeta, every history array (M_n of the level: the next
+step commits M_{n+1} first), the displacement solver's carried vectors (so the first step
+after a restart does the same arithmetic), the step, and a hash of the scene (output
+settings excluded) so that a restart cannot silently continue another problem. Rank 0
+writes with h5py to a temporary name and renames.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from .config import Config, ConfigError, OutputConfig, dumps
+from .config import Config, OutputConfig, dumps
+from .errors import ConfigError
 
 NAME = "checkpoint.h5"
 

@@ -1,4 +1,4 @@
-"""Command line: ``python -m solver {run,check} ...``; works unchanged under mpirun.
+"""Command line: ``python -m solver {run,check,bench,study,convergence,plot,paraview} ...``; runs under mpirun.
 
 Bad input gives one line on stderr (rank 0 only) and exit code 2; a failed
 solve exits 1 with the step, time and reason; results are never overwritten
@@ -15,13 +15,10 @@ from pathlib import Path
 from mpi4py import MPI
 
 from . import __version__
-from .config import ConfigError, load
+from .config import load
+from .errors import InputError, SolveFailure, UsageError
 
 log = logging.getLogger("solver")
-
-
-class UsageError(Exception):
-    """A mistake of the user's (exit code 2)."""
 
 
 def _setup_logging(comm: MPI.Comm, verbose: bool) -> None:
@@ -124,7 +121,7 @@ def cmd_check(args, comm: MPI.Comm) -> int:
 
     cfg = load(args.config, args.overrides)
     # building the geometry also checks boundary names and intervals against the mesh
-    build(comm, cfg.mesh, cfg.boundaries, 3 if cfg.material.model == "3d" else 2)
+    build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
     physics = ["elasticity"]
     if cfg.contact:
         physics.append("contact(" + ",".join(p.name for p in cfg.contact) + ")")
@@ -151,7 +148,7 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
     start = time.perf_counter()
     try:
-        _, rows = run(cfg, outdir, comm, on_step=update, model=model, restart=args.restart)
+        rows = run(model, outdir, on_step=update, restart=args.restart)
     finally:
         if bar is not None:
             bar.close()
@@ -187,19 +184,15 @@ def main(argv: list[str] | None = None) -> int:
 
         return convergence_main(argv[1:])
     args = _parser().parse_args(argv)
-    from .damage import DamageSolveError
-    from .mechanics import SolverError
-    from .stepper import NonFiniteError
-
     try:
         if args.command == "check":
             return cmd_check(args, comm)
         return cmd_run(args, comm)
-    except (ConfigError, UsageError) as exc:
+    except InputError as exc:
         if comm.rank == 0:
             print(f"error: {exc}", file=sys.stderr)
         return 2
-    except (SolverError, DamageSolveError, NonFiniteError) as exc:
+    except SolveFailure as exc:
         if comm.rank == 0:
             print(f"failed: {exc}", file=sys.stderr)
         return 1

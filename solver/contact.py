@@ -1,4 +1,4 @@
-"""Frictionless normal compliance on the contact parts: -sigma_nu = p(u_nu - g), p(r) = r_+ / mu.
+"""Frictionless normal compliance on the contact parts (docs/model.md §1, §3.3): -sigma_nu = p(u_nu - g), p(r) = r_+ / mu.
 
 UFL differentiates ``max_value`` to the Heaviside H(u_nu - g) / mu, which is the
 semismooth Newton's generalized derivative.
@@ -8,10 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from .config import BoundaryConfig
 from .geometry import Geometry
+from .operators import assemble_without_diagonal
 
 
 def normal_compliance(r, mu: float):
@@ -50,76 +54,47 @@ def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: i
     )
 
 
+class ContactTerm:
+    """j(u, w) as a residual term and its Jacobian C, with C's active set tracked between calls.
 
-class ContactPoints:
-    """The contact term at its quadrature points: u_nu - g = N u - g and j(u) = N^T W p(N u - g).
-
-    N (sparse, local dofs incl. ghosts -> points of the facets this rank integrates) and the
-    weights W reproduce the ``ds`` rule of :func:`residual` exactly, so every method works on
-    the same discrete contact term. Used by the fixed-point methods and for the penetration.
+    The problem is piecewise linear, so C changes only when the active set does. A fingerprint
+    C r (r a fixed random vector) tells whether it did: a missed change could cost Newton
+    iterations, never accuracy (the residual decides convergence).
     """
 
-    def __init__(self, geo: Geometry, V, parts: tuple[BoundaryConfig, ...], degree: int) -> None:
-        import basix
-        import scipy.sparse as sp
-
-        mesh = geo.mesh
-        tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
-        if tdim != 2:
-            raise NotImplementedError("ContactPoints: 2-D meshes only")
-        mesh.topology.create_connectivity(fdim, tdim)
-        mesh.topology.create_connectivity(fdim, 0)
-        f2c, f2v = mesh.topology.connectivity(fdim, tdim), mesh.topology.connectivity(fdim, 0)
-        c2v = mesh.topology.connectivity(tdim, 0)
-        ncells = mesh.topology.index_map(tdim).size_local
-        x = V.tabulate_dof_coordinates()  # by dof node: topology vertex numbers are not geometry node numbers
-        s, wq = basix.make_quadrature(basix.CellType.interval, degree)
-        s = s[:, 0]
-        bs = V.dofmap.index_map_bs
-        rows, cols, vals, weights, gaps, inv_mu = [], [], [], [], [], []
-        npts = 0
-        for part in parts:
-            for f in geo.facets(part.name):
-                c = f2c.links(f)[0]
-                if c >= ncells:  # integrated by the rank that owns the cell
-                    continue
-                va, vb = f2v.links(f)
-                cell_vertices = list(c2v.links(c))
-                dofs = V.dofmap.cell_dofs(c)  # P1: local dof i sits at the cell's vertex i
-                da, db = dofs[cell_vertices.index(va)], dofs[cell_vertices.index(vb)]
-                xa, xb = x[da, :2], x[db, :2]
-                t = xb - xa
-                length = float(np.hypot(*t))
-                n = np.array([t[1], -t[0]]) / length
-                centre = x[dofs, :2].mean(axis=0)
-                if np.dot(centre - xa, n) > 0:  # outward
-                    n = -n
-                for sq, w in zip(s, wq):
-                    for dof, phi in ((da, 1.0 - sq), (db, sq)):
-                        for comp in range(2):
-                            rows.append(npts)
-                            cols.append(dof * bs + comp)
-                            vals.append(phi * n[comp])
-                    weights.append(w * length)
-                    gaps.append(part.gap)
-                    inv_mu.append(1.0 / part.mu)
-                    npts += 1
-        size = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
-        self.N = sp.csr_matrix((vals, (rows, cols)), shape=(npts, size))
-        self.NT = self.N.T.tocsr()
-        self.W = np.asarray(weights)
-        self.g = np.asarray(gaps)
-        self.inv_mu = np.asarray(inv_mu)
+    def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
+                 degree: int, bcs) -> None:
+        du, w = arguments
+        Fc = residual(u, w, geo, parts, degree)
+        self.residual_form = fem.form(Fc)
+        self.jacobian_ufl = ufl.derivative(Fc, u, du)
+        self.jacobian_form = fem.form(self.jacobian_ufl)
+        self.C = fpetsc.create_matrix(self.jacobian_form)
+        self.bcs = bcs
         self.comm = geo.comm
+        self._probe = self.C.createVecRight()
+        self._probe.setRandom(PETSc.Random().create(comm=geo.comm))
+        self._print = self.C.createVecLeft()
+        self._last: np.ndarray | None = None
 
-    def penetration(self, u_local) -> np.ndarray:
-        """u_nu - g at the local points."""
-        return self.N @ u_local - self.g
+    def add_residual(self, F: PETSc.Vec) -> float:
+        """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""
+        fpetsc.assemble_vector(F, self.residual_form)
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fpetsc.set_bc(F, self.bcs, scale=0.0)
+        return F.norm()
 
-    def max_penetration(self, u_local) -> float:
-        r = self.penetration(u_local)
-        return self.comm.allreduce(float(r.max()) if r.size else -np.inf, op=MPI.MAX)
+    def assemble_jacobian(self) -> bool:
+        """Assemble C at the current u; True if the active set (C) changed since the last call."""
+        assemble_without_diagonal(self.C, self.jacobian_form, self.bcs)
+        self.C.mult(self._probe, self._print)
+        values = self._print.array_r
+        changed = self._last is None or not np.array_equal(values, self._last)
+        changed = self.comm.allreduce(changed, op=MPI.LOR)
+        if changed:
+            self._last = values.copy()
+        return changed
 
-    def forces(self, values) -> np.ndarray:
-        """N^T W values: nodal forces (local array incl. ghosts; needs a reverse scatter-add)."""
-        return self.NT @ (self.W * values)
+    def forget(self) -> None:
+        """Treat the next Jacobian as new (after a restart: the matrix must be rebuilt)."""
+        self._last = None

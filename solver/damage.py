@@ -1,4 +1,4 @@
-"""The damage equation (MODEL.md sections 1-3), a P1 field with diffusion.
+"""The damage equation (docs/model.md §1, §2, §3.2), a P1 field with diffusion.
 
 Each step is one linear solve with a matrix assembled and factored once:
 
@@ -20,12 +20,11 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .config import DamageConfig
+from .errors import DamageSolveError
 from .linear import REASONS_KSP, make_ksp
 from .material import strain
 
-
-class DamageSolveError(RuntimeError):
-    """The damage linear solve did not converge."""
+__all__ = ["Damage", "DamageSolveError", "DamageStepInfo", "eta", "psi", "source"]
 
 
 def eta(zeta, zeta_star: float):
@@ -106,9 +105,10 @@ class Damage:
             worst = float((self.k * self.cfg.lambda1 / z[above] ** 2).max()) if above.any() else 0.0
             worst = self.V.mesh.comm.allreduce(worst, op=MPI.MAX)
             if worst >= 1.0:
+                zmin = self.V.mesh.comm.allreduce(float(z.min()) if z.size else np.inf, op=MPI.MIN)
                 raise DamageSolveError(
-                    f"semi-implicit damage step unstable: k lambda1 / zeta^2 = {worst:.3g} >= 1 "
-                    f"(min zeta {self.V.mesh.comm.allreduce(float(z.min()), op=MPI.MIN):.3g}); use "
+                    "SEMI_IMPLICIT_UNSTABLE",
+                    f"k lambda1 / zeta^2 = {worst:.3g} >= 1, min zeta {zmin:.3g}; use "
                     "solver.damage_scheme = 'explicit' or a smaller k")
             self.A.zeroEntries()
             fpetsc.assemble_matrix(self.A, self.a)
@@ -117,7 +117,7 @@ class Damage:
         self.ksp.solve(self.b, self.x)
         reason = self.ksp.getConvergedReason()
         if reason < 0:
-            raise DamageSolveError(f"damage solve failed: {REASONS_KSP.get(reason, reason)}")
+            raise DamageSolveError(str(REASONS_KSP.get(reason, reason)))
         self.x.copy(self.zeta.vector)
         self.zeta.x.scatter_forward()
         comm = self.V.mesh.comm

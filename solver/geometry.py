@@ -9,7 +9,8 @@ import ufl
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
-from .config import BoundaryConfig, ConfigError, MeshConfig
+from .config import BoundaryConfig, MeshConfig
+from .errors import ConfigError
 
 _DIAGONAL = {
     "right": dmesh.DiagonalType.right,

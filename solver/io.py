@@ -19,9 +19,10 @@ from petsc4py import PETSc
 CSV_COLUMNS = (
     "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
     "contact_length", "max_penetration", "zeta_min", "zeta_max", "zeta_raw_min", "zeta_raw_max", "zeta_clipped",
-    "strain_norm", "zeta_norm", "time_damage", "time_memory", "time_displacement", "time_output", "wall_time",
+    "strain_norm", "zeta_norm", "time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output",
+    "wall_time",
 )
-TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_output", "wall_time")
+TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
 
 
 class CellAverage:

@@ -1,6 +1,6 @@
-"""The long-memory integral, kept at quadrature points.
+"""The long-memory integral, kept at quadrature points (docs/model.md §3.1, §3.4).
 
-The scheme's memory sum (MODEL.md section 3) is a left-rectangle rule,
+The scheme's memory sum is a left-rectangle rule,
 
     M_n = k sum_{m=0}^{n-1} g((n - m) k) H_m,    H_m = zeta_m Phi_L(A eps(u_m)),
 
@@ -9,7 +9,9 @@ kernel g(s) = sum_i c_i exp(-s / tau_i) (tau = inf: the constant kernel) it is
 the recursion M_n^i = exp(-k / tau_i) (M_{n-1}^i + k c_i H_{n-1}): no past is
 stored. Only a tabulated (general) kernel keeps every H_m.
 
-The history is committed once per step, after the step has converged.
+The history is committed once per step, after the step has converged. The trapezoidal
+rule (``memory.rule = "trapezoid"``) adds the current level's (k/2) g(0) H_n, implicit in
+u_n: :func:`trapezoid_term` gives that term of the displacement residual.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import basix
 import numpy as np
 import ufl
 from dolfinx import fem
+from petsc4py import PETSc
 
 from .config import MemoryConfig
 
@@ -266,3 +269,17 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
     if cfg.kernel in ("constant", "exponential"):
         return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid")
     return TabulatedHistory(rule, source, cfg.table, k, steps)
+
+
+def trapezoid_term(history: PronyHistory, zeta, A, L: float):
+    """(u, w) -> the trapezoid's current-level term (k/2) g(0) (zeta_n Phi_L(A eps(u_n)), eps(w)) over the rule's points."""
+    from .material import strain
+
+    rule = history.rule
+
+    def term(u, w):
+        H = memory_source(u, zeta, A, L)
+        half_k_g0 = fem.Constant(rule.mesh, PETSc.ScalarType(0.5 * history.k * history.g0))  # not compiled into the form
+        return half_k_g0 * ufl.inner(H, strain(w)) * rule.dx
+
+    return term

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import SolveFailure
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = {"example1": ROOT / "configs" / "example1.toml", "hard": ROOT / "configs" / "hard.toml"}
 MUS = [10.0 ** -e for e in range(0, 13)]
@@ -41,40 +43,26 @@ VARIANTS = {
     "newton+semi_implicit_damage": ["solver.method='newton'", "solver.damage_scheme='semi_implicit'"],
     "newton+trapezoid_memory": ["solver.method='newton'", "memory.rule='trapezoid'"],
 }
-STATUS = {"CONVERGED": "converged", "DIVERGED_RESIDUAL_GROWTH": "diverged", "DIVERGED_FNORM_NAN": "diverged",
-          "DIVERGED_STAGNATION": "stagnated", "DIVERGED_MAX_IT": "too_many_iterations"}
 COLUMNS = ["scene", "method", "mu", "n", "k", "status", "reason", "failed_step", "iterations_per_step",
            "max_iterations", "linear_solves_per_step", "factorizations", "max_penetration", "zeta_left_range",
            "zeta_raw_min", "zeta_raw_max", "error", "error_u", "error_zeta", "error_T", "levels", "seconds"]
 
 
-def _status(exc: Exception) -> tuple[str, str]:
-    from .damage import DamageSolveError
-    from .stepper import NonFiniteError
-
-    text = str(exc)
-    if isinstance(exc, DamageSolveError):
-        return "damage_failed", text
-    if isinstance(exc, NonFiniteError):
-        return "non_finite", text
-    for key, status in STATUS.items():
-        if key in text:
-            return status, text
-    return "failed", text
+def _status(failure: SolveFailure | None) -> tuple[str, str]:
+    """The study's status word and reason for a run's outcome (from the failure's type and fields)."""
+    if failure is None:
+        return "converged", ""
+    return failure.status, str(failure)
 
 
 def _point(ref, scene: str, label: str, mu: float, n: int, k: float, max_it: int) -> dict:
     extra = [*VARIANTS[label], f"solver.max_it={max_it}"]
     row = {"scene": scene, "method": label, "mu": mu, "n": n, "k": k, "status": "converged", "reason": "",
            "failed_step": ""}
-    try:
-        rec, rows = ref.measure(extra, n, k)
-    except Exception as exc:  # every failure is recorded with its reason
-        rec, rows = getattr(exc, "record", None), getattr(exc, "rows", [])
-        if rec is None:
-            raise
-        row["status"], row["reason"] = _status(exc)
-        row["failed_step"] = len(rows)
+    rec, rows = ref.measure(extra, n, k)
+    if rec["failure"] is not None:  # every failure is recorded with its reason
+        row["status"], row["reason"] = _status(rec["failure"])
+        row["failed_step"] = rec["failure"].step
     zstar = ref.model.cfg.damage.zeta_star
     its = [r["newton_iterations"] for r in rows[1:]] or [0]
     row.update({

@@ -34,6 +34,14 @@ def _collect(comm):
     comm.barrier()
 
 
+def solve(cfg, comm, outdir=None, **kwargs):
+    """Build a scene's model and run it: (model, rows)."""
+    from solver.stepper import build_model, run
+
+    model = build_model(cfg, comm)
+    return model, run(model, outdir, **kwargs)
+
+
 def eval_point(expr, mesh, point=(1 / 3, 1 / 3)) -> np.ndarray:
     """Value of a UFL expression at a reference point of local cell 0 (constant-data tests)."""
     from dolfinx import fem

@@ -53,7 +53,7 @@ def test_solver_failure_stops_cleanly(tmp_path, nproc):
     assert res.returncode == 1
     msg = [ln for ln in res.stderr.splitlines() if ln.startswith("failed:")]
     assert len(msg) == 1 and "Traceback" not in res.stderr
-    assert "step 11: displacement solve at t = 0.55 failed: SNES DIVERGED_MAX_IT" in msg[0]
+    assert "step 11, t = 0.55: displacement solve failed: SNES DIVERGED_MAX_IT, 4 iterations" in msg[0]
     assert "last residuals [" in msg[0]
     # everything written so far is kept and readable: rows 0..10, levels up to 0.5, the checkpoint of step 10
     rows = read_csv(out / "timeseries.csv")

@@ -3,12 +3,11 @@
 
 import numpy as np
 import pytest
-from conftest import ROOT, by_cell, by_node, run_cli
+from conftest import ROOT, by_cell, by_node, run_cli, solve
 
 from solver.config import load
 from solver.io import TIMING_COLUMNS
 from solver.post import point_value, read_csv, read_results
-from solver.stepper import run
 
 # Produced by this code (serial, n = 8, k = 0.05) and reproduced with 2 and 3 ranks to ~1e-14.
 # Not a published value: it pins the scheme so that an unintended change shows.
@@ -25,7 +24,7 @@ REFERENCE = {
 
 def test_example1_regression(comm):
     cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=8", "mesh.ny=8", "time.k=0.05"])
-    model, rows = run(cfg, None, comm)
+    model, rows = solve(cfg, comm)
     assert len(rows) == 21 and rows[-1]["t"] == pytest.approx(1.0)
     assert point_value(model.u, [1.0, 1.0]) == pytest.approx(REFERENCE["u11"], rel=1e-8)
     last = rows[-1]

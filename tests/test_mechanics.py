@@ -5,10 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import solve
 from mpi4py import MPI
 
 from solver.config import from_dict
-from solver.stepper import build_model, run
+from solver.stepper import build_model
 
 
 def _x_stretch_scene(memory: dict, T=0.5, k=0.1, t=10.0, L=1000.0):
@@ -72,7 +73,7 @@ def test_block_pressed_by_foundation(comm, mu):
         "damage": {"enabled": False},
         "time": {"T": 1.0, "k": 1.0},
     })
-    model, rows = run(cfg, None, comm)
+    model, rows = solve(cfg, comm)
     a = delta / (1 + E * mu)
     x = model.u.function_space.tabulate_dof_coordinates()
     u = model.u.x.array.reshape(-1, 2)
@@ -121,7 +122,7 @@ def test_block_pressed_by_foundation_3d(tmp_path):
         "time": {"T": 1.0, "k": 1.0},
     })
     comm = MPI.COMM_WORLD
-    model, rows = run(cfg, None, comm)
+    model, rows = solve(cfg, comm)
     a = delta / (1 + E * mu)
     x = model.u.function_space.tabulate_dof_coordinates()
     u = model.u.x.array.reshape(-1, 3)

@@ -7,16 +7,15 @@ under a constant load it stays, after unloading it vanishes. The paper's "relaxe
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, solve
 
 from solver.config import load
 from solver.post import read_results
-from solver.stepper import run
 
 
 def _run(comm, tmp, name, k):
     cfg = load(ROOT / f"configs/{name}.toml", [f"time.k={k}", "output.every=0"])
-    _, rows = run(cfg, tmp, comm)
+    _, rows = solve(cfg, comm, tmp)
     comm.barrier()
     return rows, read_results(tmp)
 

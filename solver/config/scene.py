@@ -1,0 +1,167 @@
+"""A whole scene: the registry of sections, reading TOML, ``--set`` overrides, writing it back.
+
+A section is one module with a frozen dataclass, ``parse(ctx, table, scene)`` and
+``to_toml(value)``; :data:`SECTIONS` lists them in parse order (a section may read the
+ones before it, and ``scene["dim"]``). Adding a section means adding its module and one
+row here.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import tomlkit
+
+from ..errors import ConfigError
+from . import boundary, damage, material, memory, mesh, output, solver, time
+from .boundary import BoundaryConfig
+from .damage import DamageConfig
+from .fields import Ctx
+from .material import MaterialConfig
+from .memory import MemoryConfig
+from .mesh import MeshConfig
+from .output import OutputConfig
+from .solver import SolverConfig
+from .time import TimeConfig
+
+
+class Section(NamedTuple):
+    """A TOML table, the Config field it fills, and its module's parse and to_toml."""
+
+    key: str
+    attr: str
+    parse: Callable[[Ctx, Any, dict], Any]
+    to_toml: Callable[[Any], dict]
+    missing: Any = None  # what parse receives when the table is absent ({}: all defaults)
+
+
+SECTIONS: tuple[Section, ...] = (
+    Section("mesh", "mesh", mesh.parse, mesh.to_toml, {}),
+    Section("boundary", "boundaries", boundary.parse, boundary.to_toml, None),
+    Section("material", "material", material.parse, material.to_toml, {}),
+    Section("memory", "memory", memory.parse, memory.to_toml, {}),
+    Section("damage", "damage", damage.parse, damage.to_toml, {}),
+    Section("time", "time", time.parse, time.to_toml, {}),
+    Section("solver", "solver", solver.parse, solver.to_toml, {}),
+    Section("output", "output", output.parse, output.to_toml, {}),
+)
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole scene."""
+
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    boundaries: tuple[BoundaryConfig, ...] = ()
+    material: MaterialConfig = field(default_factory=MaterialConfig)
+    memory: MemoryConfig = field(default_factory=MemoryConfig)
+    damage: DamageConfig = field(default_factory=DamageConfig)
+    time: TimeConfig = field(default_factory=TimeConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    source: str = "<defaults>"
+
+    @property
+    def dim(self) -> int:
+        """Geometric dimension of the scene (the material model says it: '3d' or a plane model)."""
+        return 3 if self.material.model == "3d" else 2
+
+    @property
+    def contact(self) -> tuple[BoundaryConfig, ...]:
+        return tuple(b for b in self.boundaries if b.role == "contact")
+
+    @property
+    def tractions(self) -> tuple[BoundaryConfig, ...]:
+        return tuple(b for b in self.boundaries if b.role == "traction")
+
+    @property
+    def clamped(self) -> tuple[BoundaryConfig, ...]:
+        return tuple(b for b in self.boundaries if b.role == "clamped")
+
+
+def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> Config:
+    """Validate a parsed TOML document and build a :class:`Config`."""
+    ctx = Ctx(source)
+    if not isinstance(data, dict):
+        raise ctx.fail("<document>", data, "must be a TOML table")
+    known = [s.key for s in SECTIONS]
+    for key in data:
+        if key not in known:
+            raise ctx.fail(key, data[key], "unknown section; allowed: " + ", ".join(known))
+    scene: dict[str, Any] = {"base": base or Path.cwd(), "dim": 2}
+    for s in SECTIONS:
+        scene[s.key] = s.parse(ctx, data.get(s.key, s.missing), scene)
+        if s.key == "mesh" and scene["mesh"].kind == "gmsh":
+            scene["dim"] = mesh.gmsh_dim(scene["mesh"].file)
+    return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source)
+
+
+def parse_override(item: str) -> tuple[list[str], Any]:
+    """Parse ``section.key=value`` (value in TOML syntax; bare words are strings)."""
+    if "=" not in item:
+        raise ConfigError(f"--set {item!r}: expected section.key=value")
+    key, raw = item.split("=", 1)
+    path = key.strip().split(".")
+    if len(path) < 2 or not all(path):
+        raise ConfigError(f"--set {item!r}: the key must be section.key (e.g. mesh.nx=32)")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return path, value
+
+
+def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    """Apply ``--set`` overrides to a parsed document (before validation)."""
+    for item in overrides:
+        path, value = parse_override(item)
+        node = data
+        for part in path[:-1]:
+            if part not in node:
+                node[part] = {}
+            node = node[part]
+            if not isinstance(node, dict):
+                raise ConfigError(f"--set {item!r}: {part} is not a table")
+        node[path[-1]] = value
+    return data
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> Config:
+    """Read, override and validate a scene file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such scene file")
+    text = path.read_bytes()
+    try:
+        data = tomllib.loads(text.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text (UTF-8) file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    if not data:
+        raise ConfigError(f"{path}: the scene file is empty (a scene needs at least one section)")
+    data = apply_overrides(data, overrides or [])
+    return from_dict(data, source=str(path), base=path.parent.resolve())
+
+
+def to_dict(cfg: Config) -> dict:
+    """The fully resolved scene as a TOML-shaped dictionary (round-trips through from_dict)."""
+    return {s.key: _lists(s.to_toml(getattr(cfg, s.attr))) for s in SECTIONS}
+
+
+def _lists(v: Any) -> Any:
+    """Tuples as lists, all the way down (what a TOML writer takes)."""
+    if isinstance(v, dict):
+        return {k: _lists(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_lists(x) for x in v]
+    return v
+
+
+def dumps(cfg: Config) -> str:
+    """TOML text of the resolved scene (written with tomlkit: arrays stay on one line)."""
+    return f"# resolved scene (from {cfg.source})\n" + tomlkit.dumps(to_dict(cfg))

@@ -1,0 +1,77 @@
+"""[solver]: the displacement method and its tolerances, the damage scheme, linear solvers, quadrature."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from .fields import Ctx, check_keys, integer, names, need, number, string
+
+METHODS = ("newton", "penalty_duality", "fixed_point")
+DAMAGE_SCHEMES = ("explicit", "semi_implicit")
+LINEAR = ("auto", "petsc", "mumps", "redundant")
+_DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Solver settings: the displacement method (newton | penalty_duality | fixed_point) with its
+    tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
+    damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees."""
+
+    rtol: float = 1e-10
+    max_it: int = 25
+    linear: str = "auto"
+    method: str = "newton"
+    penalty_duality_omega: float = 0.5
+    damage_scheme: str = "explicit"
+    quadrature_degree: int = 1
+    damage_quadrature_degree: int = 2
+    contact_quadrature_degree: int = 2
+    petsc_options: tuple[tuple[str, str], ...] = ()
+
+
+def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
+    t = check_keys(ctx, "solver", t, names(SolverConfig))
+    d = SolverConfig()
+    rtol = number(ctx, "solver.rtol", t.get("rtol", d.rtol))
+    need(ctx, "solver.rtol", rtol, 0 < rtol < 1, "must be in (0, 1)")
+    max_it = integer(ctx, "solver.max_it", t.get("max_it", d.max_it))
+    need(ctx, "solver.max_it", max_it, max_it >= 1, "must be >= 1")
+    linear = string(ctx, "solver.linear", t.get("linear", d.linear), LINEAR)
+    method = string(ctx, "solver.method", t.get("method", d.method), METHODS)
+    omega = number(ctx, "solver.penalty_duality_omega", t.get("penalty_duality_omega", d.penalty_duality_omega))
+    need(ctx, "solver.penalty_duality_omega", omega, omega > 0, "must be > 0 (omega = value / mu)")
+    damage_scheme = string(ctx, "solver.damage_scheme", t.get("damage_scheme", d.damage_scheme), DAMAGE_SCHEMES)
+    degs = {}
+    for key in _DEGREES:
+        degs[key] = integer(ctx, f"solver.{key}", t.get(key, getattr(d, key)))
+        need(ctx, f"solver.{key}", degs[key], 1 <= degs[key] <= 10, "must be in 1..10")
+    has_contact = any(b.role == "contact" for b in scene["boundary"])
+    if method != "newton" and has_contact and scene["dim"] != 2:
+        raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
+    if scene["memory"].rule == "trapezoid" and method != "newton" and has_contact:
+        raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
+    return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs,
+                        petsc_options=_petsc_options(ctx, t.get("petsc_options", {})))
+
+
+def _petsc_options(ctx: Ctx, opts) -> tuple[tuple[str, str], ...]:
+    if not isinstance(opts, dict):
+        raise ctx.fail("solver.petsc_options", opts, "must be a table of PETSc option = value")
+    out = []
+    for key, val in opts.items():
+        if isinstance(val, dict) or isinstance(val, list):
+            raise ctx.fail(f"solver.petsc_options.{key}", val, "must be a string, number or boolean")
+        if isinstance(val, float) and not math.isfinite(val):
+            raise ctx.fail(f"solver.petsc_options.{key}", val, "must be finite")
+        sval = ("true" if val else "false") if isinstance(val, bool) else str(val)
+        out.append((str(key), sval))
+    return tuple(out)
+
+
+def to_toml(m: SolverConfig) -> dict:
+    out = dataclasses.asdict(m)
+    out["petsc_options"] = dict(m.petsc_options)
+    return out

@@ -1,0 +1,124 @@
+"""Every failure the solver reports, as typed exceptions that carry their facts as fields.
+
+Callers decide by type and fields, never by the message text:
+
+- :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
+  scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
+  line and the results directory.
+- :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
+  (filled in by the stepper, :meth:`SolveFailure.at`), and a ``status`` word for studies:
+  :class:`DisplacementSolveError` (``method``, ``reason``, ``iterations``, ``residuals``,
+  ``tolerance``), :class:`DamageSolveError` (``reason``), :class:`NonFiniteError` (``fields``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+# displacement-solver reasons -> the study's status words
+_STATUS = {
+    "DIVERGED_RESIDUAL_GROWTH": "diverged",
+    "DIVERGED_FNORM_NAN": "diverged",
+    "DIVERGED_STAGNATION": "stagnated",
+    "DIVERGED_MAX_IT": "too_many_iterations",
+}
+
+
+class CampoError(Exception):
+    """Base of every error the solver raises on purpose."""
+
+
+# ----------------------------------------------------------------------------- input
+
+
+class InputError(CampoError, ValueError):
+    """The user's input is wrong: one line for the user, exit code 2."""
+
+
+class ConfigError(InputError):
+    """A scene is invalid: ``key`` = ``value`` is not ``allowed`` (in file ``source``).
+
+    Raised either with the fields (the message is composed from them) or with a ready
+    message for checks that are not about one key (a mesh that lacks a named group).
+    """
+
+    def __init__(self, message: str | None = None, *, source: str = "", key: str = "", value: Any = None,
+                 allowed: str = "") -> None:
+        self.source, self.key, self.value, self.allowed = source, key, value, allowed
+        if message is None:
+            message = f"{source}: {key} = {show(value)}: {allowed}" if source else f"{key} = {show(value)}: {allowed}"
+        super().__init__(message)
+
+
+class UsageError(InputError):
+    """A mistake on the command line or with the results directory (exit code 2)."""
+
+
+def show(value: Any) -> str:
+    """A value as the user wrote it: strings quoted, tables by their keys."""
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "{" + ", ".join(value) + "}"
+    return str(value)
+
+
+# ----------------------------------------------------------------------------- run failures
+
+
+class SolveFailure(CampoError, RuntimeError):
+    """A run stopped at a time level (exit code 1). ``step``/``t`` are None until the stepper sets them."""
+
+    status = "failed"
+
+    def __init__(self, detail: str, *, step: int | None = None, t: float | None = None) -> None:
+        self.detail, self.step, self.t = detail, step, t
+        super().__init__(detail)
+
+    def at(self, step: int, t: float) -> SolveFailure:
+        """Record where it happened (the message then starts with the step and time)."""
+        self.step, self.t = step, t
+        self.args = (str(self),)
+        return self
+
+    def __str__(self) -> str:
+        if self.step is None:
+            return self.detail
+        return f"step {self.step}, t = {self.t:.6g}: {self.detail}"
+
+
+class DisplacementSolveError(SolveFailure):
+    """The displacement problem of a level did not converge."""
+
+    def __init__(self, method: str, reason: str, iterations: int, residuals: list[float], tolerance: float,
+                 linear_reason: int = 0) -> None:
+        self.method, self.reason, self.iterations = method, reason, iterations
+        self.residuals, self.tolerance, self.linear_reason = list(residuals), tolerance, linear_reason
+        tail = ", ".join(f"{r:.3e}" for r in self.residuals[-5:])
+        linear = f", linear solve {linear_reason}" if linear_reason < 0 else ""
+        super().__init__(f"displacement solve failed: {method} {reason}{linear}, {iterations} iterations, "
+                         f"last residuals [{tail}] (tolerance {tolerance:.3e})")
+
+    @property
+    def status(self) -> str:  # type: ignore[override]
+        return _STATUS.get(self.reason, "failed")
+
+
+class DamageSolveError(SolveFailure):
+    """The damage step failed: its linear solve, or the semi-implicit step's stability condition."""
+
+    status = "damage_failed"
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        self.reason = reason
+        super().__init__(f"damage step failed: {reason}" + (f" ({detail})" if detail else ""))
+
+
+class NonFiniteError(SolveFailure):
+    """A field became NaN or inf."""
+
+    status = "non_finite"
+
+    def __init__(self, fields: list[str]) -> None:
+        self.fields = sorted(set(fields))
+        super().__init__(f"non-finite values in {', '.join(self.fields)}")

@@ -1,0 +1,126 @@
+"""Semismooth Newton on a level's displacement problem, driven by PETSc SNES (docs/model.md §3.3, §4).
+
+The contact term's generalized derivative is H(u_nu - g)/mu (UFL differentiates max_value to
+it). The Jacobian is rebuilt only when the active set changes, and PETSc refactors a
+matrix only when it was modified, so a step with an unchanged active set costs one
+triangular solve pair. Without contact (and without an implicit memory term) the problem
+is linear and SNES runs as a single KSP solve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .config import SolverConfig
+from .displacement import DisplacementProblem
+from .errors import DisplacementSolveError
+from .linear import REASONS_SNES, clear_options, direct_options, set_options
+
+
+@dataclass
+class SolveInfo:
+    """Iterations, linear solves, factorizations and final residual of one solve."""
+
+    iterations: int
+    factorizations: int
+    residual: float
+    reason: str
+    linear_solves: int = 0
+
+
+class NewtonSolver:
+    """SNES (options prefix ``mech_``) on a :class:`DisplacementProblem`, with the project's convergence test:
+
+    ||F|| <= rtol * scale, or ||du|| <= rtol ||u|| after a Newton step (with 1/mu ~ 1e10 the
+    residual has a round-off floor ~ eps ||J|| ||u|| that can exceed rtol * scale; a correction
+    below rtol ||u|| then means the active set is settled and the direct solve exact).
+    """
+
+    prefix = "mech_"
+
+    def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm) -> None:
+        self.problem, self.settings = problem, settings
+        self.factorizations = 0
+        self._scale = 1.0
+        self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
+        self._F0 = problem.r.duplicate()
+        defaults = direct_options(comm, settings.linear, problem.symmetric)
+        defaults.update({
+            "snes_type": "newtonls" if problem.nonlinear else "ksponly",
+            "snes_linesearch_type": "basic",
+            # the penalty 1/mu makes the residual jump by ~1/mu when contact first activates:
+            # not a divergence, so PETSc's residual-growth test is off (max_it still applies)
+            "snes_divergence_tolerance": "-1",
+        })
+        set_options(self.prefix, defaults, settings.petsc_options)
+        snes = PETSc.SNES().create(comm)
+        snes.setOptionsPrefix(self.prefix)
+        snes.setFunction(self._residual, problem.r.duplicate())
+        snes.setJacobian(self._jacobian, problem.J, problem.J)
+        snes.setTolerances(rtol=settings.rtol, atol=0.0, stol=settings.rtol, max_it=settings.max_it)
+        snes.setConvergenceTest(self._converged)
+        snes.setConvergenceHistory(reset=True)
+        snes.setFromOptions()
+        clear_options(self.prefix, defaults)
+        self.snes = snes
+
+    def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
+        if self._initial is not None:  # the first evaluation, at u_{n-1}: already known
+            self._initial.copy(F)
+            self._initial = None
+            return
+        self.problem.evaluate(x, F)
+
+    def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, J: PETSc.Mat, P: PETSc.Mat) -> None:
+        if self.problem.update_jacobian(x):
+            self.factorizations += 1
+        elif self.factorizations == 0:  # the first solve factors the fixed K
+            self.factorizations = 1
+
+    def _converged(self, snes: PETSc.SNES, it: int, norms: tuple[float, float, float]) -> int:
+        xnorm, snorm, fnorm = norms
+        rtol = self.settings.rtol
+        R = PETSc.SNES.ConvergedReason
+        if not np.isfinite(fnorm):
+            return R.DIVERGED_FNORM_NAN
+        if fnorm <= rtol * self._scale:
+            return R.CONVERGED_FNORM_ABS
+        if it > 0 and snorm <= rtol * xnorm:
+            return R.CONVERGED_SNORM_RELATIVE
+        if it >= self.settings.max_it:
+            return R.DIVERGED_MAX_IT
+        return R.ITERATING
+
+    def solve(self, scale: float) -> SolveInfo:
+        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
+        problem, u = self.problem, self.problem.u
+        self._scale = scale
+        problem.first_residual(self._F0)
+        self._initial = self._F0
+        f0 = self.factorizations
+        self.snes.solve(None, u.vector)
+        self._initial = None
+        u.x.scatter_forward()
+        reason = self.snes.getConvergedReason()
+        history, _ = self.snes.getConvergenceHistory()
+        its = self.snes.getIterationNumber()
+        if problem.nonlinear:
+            residual = float(history[its]) if len(history) > its else float("nan")
+        else:
+            problem.evaluate(u.vector, problem.r)
+            residual = problem.r.norm()
+        ksp_reason = self.snes.getKSP().getConvergedReason()
+        tol = self.settings.rtol * scale
+        ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
+        if ok and not problem.nonlinear:
+            # one exact (direct) solve of a linear problem: the residual must meet the tolerance
+            ok = residual <= tol
+        problem.carried = ok
+        name = REASONS_SNES.get(reason, str(reason))
+        if not ok:
+            raise DisplacementSolveError("SNES", name, its, list(history), tol, linear_reason=ksp_reason)
+        return SolveInfo(max(its, 1), self.factorizations - f0, residual, name, linear_solves=max(its, 1))
