@@ -62,7 +62,8 @@ CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 MAX_LEVELS_PER_CHUNK = 100
 CHUNK_BYTES = 256 * 2**20
-KILL_ENV = "SOLVER_TEST_KILL"  # test hook: "stage:k" SIGKILLs this process inside the k-th write (see _Hook)
+KILL_ENV = "SOLVER_TEST_KILL"  # test hooks: "stage:k" SIGKILLs this process inside its k-th write of stage,
+ENOSPC_ENV = "SOLVER_TEST_ENOSPC"  # or fails it there with OSError ENOSPC, as a full disk does (see _Hook)
 
 _HEAD = ('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n  <Domain>\n'
          '    <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">\n')
@@ -206,15 +207,18 @@ def tensor6(rows: np.ndarray, dim: int) -> np.ndarray:
 
 
 class _Hook:
-    """Test hook: ``SOLVER_TEST_KILL=stage:k`` SIGKILLs this process in the middle of its k-th write of ``stage``.
+    """Test hook: ``SOLVER_TEST_KILL=stage:k`` SIGKILLs this process in the middle of its k-th write of
+    ``stage``; ``SOLVER_TEST_ENOSPC=stage:k`` raises OSError ENOSPC there instead.
 
     Stages: ``data`` (half of a level's first field written), ``xml`` (half of the grid written
     into the padding), ``flip`` (grid written, not yet made live), ``chunk`` (a new chunk file
-    half created by HDF5). Counts are per process, from 1.
+    half copied). Counts are per writer, from 1.
     """
 
     def __init__(self) -> None:
         spec = os.environ.get(KILL_ENV, "")
+        self.enospc = not spec
+        spec = spec or os.environ.get(ENOSPC_ENV, "")
         self.stage, _, k = spec.partition(":")
         self.at = int(k) if k.isdigit() else 0
         self.counts: dict[str, int] = {}
@@ -225,8 +229,9 @@ class _Hook:
         self.counts[stage] = self.counts.get(stage, 0) + 1
         return self.counts[stage] == self.at
 
-    @staticmethod
-    def kill() -> None:
+    def kill(self) -> None:
+        if self.enospc:
+            raise OSError(28, "No space left on device (test hook)", None)
         os.kill(os.getpid(), signal.SIGKILL)
 
 
@@ -343,7 +348,7 @@ class XDMFSeries:
             except SeriesError as exc:
                 error = str(exc)
             except OSError as exc:
-                error = _describe(exc)
+                error = describe_oserror(exc) + ("" if exc.filename else f" (writing in {self.directory})")
             except Exception as exc:  # noqa: BLE001  (any failure on rank 0 must reach every rank, or they hang)
                 error = f"{type(exc).__name__}: {exc}"
         error = self.comm.bcast(error, root=0) if self.comm.size > 1 else error
@@ -646,14 +651,15 @@ class XDMFSeries:
         self._collective(finish)
 
 
-def _describe(exc: OSError) -> str:
+def describe_oserror(exc: OSError) -> str:
     """``No space left on device (writing results/fields/levels_000100.h5)``: the reason and the file."""
     reason = exc.strerror or str(exc)
     return f"{reason} ({exc.filename})" if exc.filename else reason
 
 
 def read_series(path: str | Path) -> dict:
-    """Read a series back with h5py (independently of the writer): points, cells, times, {field: [values per time]}."""
+    """Read a series back with h5py (independently of the writer): points, cells, times, {field: [values per time]}
+    (None at a time that lacks the field: a restart may change ``output.fields``)."""
     import h5py
 
     path = Path(path)
@@ -677,9 +683,13 @@ def read_series(path: str | Path) -> dict:
             if "points" not in out:
                 out["points"] = load(g.find("Geometry/DataItem"))
                 out["cells"] = load(g.find("Topology/DataItem"))
+            i = len(out["times"])
             out["times"].append(float(g.find("Time").get("Value")))
             for att in g.findall("Attribute"):
-                out["fields"].setdefault(att.get("Name"), []).append(load(att.find("DataItem")))
+                values = out["fields"].setdefault(att.get("Name"), [])
+                values += [None] * (i - len(values)) + [load(att.find("DataItem"))]
+        for values in out["fields"].values():
+            values += [None] * (len(out["times"]) - len(values))
     finally:
         for f in files.values():
             f.close()
