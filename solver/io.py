@@ -1,8 +1,4 @@
-"""Writers beside the XDMF series (solver/xdmf.py): CSV time series (rank 0), resolved config, cell averages.
-
-XDMF cannot hold quadrature functions, so stresses are written as DG0 cell
-averages (exact L2 projection onto piecewise constants).
-"""
+"""Writers beside the XDMF series (solver/xdmf.py): CSV time series and resolved config (rank 0), von Mises."""
 
 from __future__ import annotations
 
@@ -11,11 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import ufl
-from dolfinx import fem
-from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from .errors import OutputError
 from .xdmf import describe_oserror
@@ -27,34 +19,6 @@ CSV_COLUMNS = (
     "wall_time",
 )
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
-
-
-class CellAverage:
-    """Cell averages of a UFL expression into a DG0 function: the L2 projection onto DG0."""
-
-    def __init__(self, expr, target: fem.Function, dx: ufl.Measure) -> None:
-        self.target = target
-        V = target.function_space
-        tau = ufl.TestFunction(V)
-        self.form = fem.form(ufl.inner(expr, tau) * dx)
-        self.vec = fpetsc.create_vector(self.form)
-        mesh = V.mesh
-        S = fem.FunctionSpace(mesh, ("DG", 0))
-        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S) * ufl.dx))
-        vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.bs = V.dofmap.index_map_bs
-        n = V.dofmap.index_map.size_local
-        self.inv_vol = 1.0 / vol.array_r[:n]
-        self.n = n
-
-    def update(self) -> None:
-        with self.vec.localForm() as v:
-            v.set(0.0)
-        fpetsc.assemble_vector(self.vec, self.form)
-        self.vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        vals = self.target.x.array[: self.n * self.bs].reshape(self.n, self.bs)
-        vals[:] = self.vec.array_r.reshape(self.n, self.bs) * self.inv_vol[:, None]
-        self.target.x.scatter_forward()
 
 
 def von_mises_array(s: np.ndarray, dim: int) -> np.ndarray:

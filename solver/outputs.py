@@ -1,25 +1,80 @@
 """The fields a run writes for ParaView: u, zeta and cell-wise stresses (docs/model.md §5 for what the paper shows).
 
 XDMF cannot hold quadrature functions, so the stresses sigma = A eps(u) + M and A eps(u)
-are written as DG0 cell averages (the exact L2 projection onto piecewise constants),
-with their von Mises values. ``output.fields`` chooses which are written; only the cell
-averages those need are computed. The series itself is :class:`solver.xdmf.XDMFSeries`.
+are written as cell averages (the L2 projection onto piecewise constants), with their von
+Mises values. ``output.fields`` chooses which are written; only what those need is
+computed. The series itself is :class:`solver.xdmf.XDMFSeries`.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+import ufl
 from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
 
 from .config import MaterialConfig, OutputConfig
 from .errors import OutputError, UsageError
-from .io import CellAverage, von_mises_array
+from .io import von_mises_array
 from .material import elasticity, strain
-from .xdmf import DolfinxRows, FieldSpec, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
+from .xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
          "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar")}
+
+
+class CellStresses:
+    """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
+
+    For P1 displacements A eps(u) is constant on each cell: its average is one sparse product
+    G u with G assembled once (rows scaled by 1/|K|). The memory M lives at the points of the
+    quadrature rule that integrates it everywhere else; on affine cells its L2 projection onto
+    constants with that rule is the weighted mean of its point values. Rows are in the local
+    order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
+    """
+
+    def __init__(self, model, material: MaterialConfig) -> None:
+        mesh = model.geo.mesh
+        self.d = d = mesh.geometry.dim
+        self.u, self.history = model.u, model.history
+        T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
+        du, tau = ufl.TrialFunction(model.u.function_space), ufl.TestFunction(T0)
+        self.G = fpetsc.assemble_matrix(fem.form(ufl.inner(elasticity(strain(du), material.E, material.nu,
+                                                                         material.model), tau) * ufl.dx))
+        self.G.assemble()
+        S0 = fem.FunctionSpace(mesh, ("DG", 0))
+        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
+        scale = self.G.createVecLeft()
+        n_dofs = T0.dofmap.index_map.size_local
+        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], d * d)
+        self.G.diagonalScale(L=scale)
+        self.out = self.G.createVecLeft()
+        imap = mesh.topology.index_map(mesh.topology.dim)
+        n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
+        self.cells = RowMap(T0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], d * d)  # DG0: one dof per cell
+        if self.history is not None:
+            rule = model.rule
+            npts = len(rule.weights)
+            self.npts = npts
+            self.points = RowMap(self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], d * d)
+            self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
+
+    def elastic(self) -> np.ndarray:
+        """A eps(u) per owned cell, rows of d*d (row-major)."""
+        self.G.mult(self.u.vector, self.out)
+        return self.cells.take(self.out.array_r)
+
+    def total(self, elastic: np.ndarray) -> np.ndarray:
+        """sigma = A eps(u) + (cell average of M), given A eps(u)."""
+        if self.history is None:
+            return elastic
+        dd = self.d * self.d
+        M = self.points.take(self.history.M.x.array)
+        if self.npts == 1:  # one point per cell: the average is the value
+            return elastic + M
+        return elastic + (M.reshape(-1, self.npts, dd) * self.q_weights).sum(axis=1)
 
 
 class Outputs:
@@ -38,52 +93,43 @@ class Outputs:
         if outdir is None or not self.names:
             return
         self.model = model
-        want = set(self.names)
-        T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
-        S0 = fem.FunctionSpace(mesh, ("DG", 0))
-        sig_el = elasticity(strain(model.u), material.E, material.nu, material.model)
-        self.averages = []  # (tensor, its von Mises or None): only what the chosen fields need
-        self.cell: dict[str, fem.Function] = {}
-        for tensor, scalar, sig in (("stress", "von_mises", sig_el + model.history.M if model.history is not None else sig_el),
-                                    ("elastic_stress", "von_mises_elastic", sig_el)):
-            if want & {tensor, scalar}:
-                T = fem.Function(T0, name=tensor)
-                # the paper's figures: memory balances the load, so "relaxes" / "not stress-free" are about A eps(u)
-                V = fem.Function(S0, name=scalar) if scalar in want else None
-                self.averages.append((CellAverage(sig, T, model.rule.dx), T, V))
-                self.cell[tensor] = T
-                if V is not None:
-                    self.cell[scalar] = V
         self.rows = DolfinxRows(mesh)
+        self.stresses = CellStresses(model, material) if set(self.names) - {"displacement", "damage"} else None
         specs = [FieldSpec(name, *KINDS[name]) for name in self.names]
         try:
             self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, expected_levels, keep_until)
         except SeriesError as exc:
             raise (UsageError(f"--restart: {exc}") if keep_until is not None else OutputError(str(exc))) from None
 
-    def update_cell_fields(self) -> None:
-        """Cell averages of the stresses the written fields need, and their von Mises values."""
-        for avg, tensor, scalar in self.averages:
-            avg.update()
-            if scalar is not None:
-                n = scalar.function_space.dofmap.index_map.size_local
-                scalar.x.array[:n] = von_mises_array(tensor.x.array[: n * self.d * self.d], self.d)
-
-    def _rows(self, name: str):
-        if name == "displacement":
-            return vector3(self.rows.rows(self.model.u))
-        if name == "damage":
-            return self.rows.rows(self.model.damage.zeta)
-        rows = self.rows.rows(self.cell[name])
-        return tensor6(rows, self.d) if name in ("stress", "elastic_stress") else rows
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        """The chosen cell fields on the owned cells: stresses as d*d rows, von Mises values."""
+        want, out = set(self.names), {}
+        if self.stresses is None:
+            return out
+        elastic = self.stresses.elastic()
+        if want & {"stress", "von_mises"}:
+            out["stress"] = self.stresses.total(elastic)
+        out["elastic_stress"] = elastic
+        for tensor, scalar in (("stress", "von_mises"), ("elastic_stress", "von_mises_elastic")):
+            if scalar in want:
+                out[scalar] = von_mises_array(out[tensor], self.d)
+        return out
 
     def write(self, t: float) -> None:
         """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays)."""
         if self.series is None:
             return
-        self.update_cell_fields()
+        cells = self.cell_fields()
+        values = {}
+        for name in self.names:
+            if name == "displacement":
+                values[name] = vector3(self.rows.rows(self.model.u))
+            elif name == "damage":
+                values[name] = self.rows.rows(self.model.damage.zeta)
+            else:
+                values[name] = tensor6(cells[name], self.d) if name in ("stress", "elastic_stress") else cells[name]
         try:
-            self.series.write(t, {name: self._rows(name) for name in self.names})
+            self.series.write(t, values)
         except SeriesError as exc:
             raise OutputError(str(exc)) from None
 

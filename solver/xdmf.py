@@ -157,28 +157,42 @@ class DolfinxRows:
         self.n_nodes = geo.index_map().size_local
         self.n_cells = top.index_map(top.dim).size_local
         self._x_dofs = _cell_nodes(mesh)
-        self._maps: dict[int, tuple[object, np.ndarray]] = {}
+        self._maps: dict[int, tuple[object, RowMap]] = {}
 
-    def _map(self, V) -> np.ndarray:
+    def _map(self, V) -> RowMap:
         key = id(V)
         if key not in self._maps or self._maps[key][0] is not V:
             cell_dofs = V.dofmap.list.array.reshape(self._x_dofs.shape[0], -1)
             family, degree = V.ufl_element().family(), V.ufl_element().degree()
             if degree == 0:  # DG0: one dof per cell
-                self._maps[key] = (V, cell_dofs[: self.n_cells, 0].copy())
+                self._maps[key] = (V, RowMap(cell_dofs[: self.n_cells, 0], V.dofmap.index_map_bs))
             elif degree == 1 and family in ("Lagrange", "Q", "P", "CG") and cell_dofs.shape[1] == self._x_dofs.shape[1]:
                 node_to_dof = np.empty(self._x_dofs.max(initial=-1) + 1, dtype=np.int64)
                 node_to_dof[self._x_dofs.ravel()] = cell_dofs.ravel()  # P1 and the geometry share the cell-local order
-                self._maps[key] = (V, node_to_dof[: self.n_nodes])
+                self._maps[key] = (V, RowMap(node_to_dof[: self.n_nodes], V.dofmap.index_map_bs))
             else:
                 raise ValueError(f"XDMF writer: {family} degree {degree} is not supported (P1 or DG0)")
         return self._maps[key][1]
 
     def rows(self, f) -> np.ndarray:
         """Values of ``f`` at this rank's owned nodes (P1) or cells (DG0), one row per node/cell."""
-        V = f.function_space
-        bs = V.dofmap.index_map_bs
-        return f.x.array.reshape(-1, bs)[self._map(V)]
+        return self._map(f.function_space).take(f.x.array)
+
+
+class RowMap:
+    """Takes given rows of a flat array of ``width``-wide rows, fast (numpy 1.24's 2-D fancy indexing costs
+    about 10x a flat ``take``); the first rows in order are returned as a view."""
+
+    def __init__(self, rows: np.ndarray, width: int) -> None:
+        rows = np.asarray(rows, dtype=np.intp).ravel()
+        self.n, self.width = len(rows), width
+        identity = np.array_equal(rows, np.arange(len(rows)))
+        self.index = None if identity else (rows[:, None] * width + np.arange(width)).ravel()
+
+    def take(self, values: np.ndarray) -> np.ndarray:
+        if self.index is None:
+            return values[: self.n * self.width].reshape(self.n, self.width)
+        return np.take(values, self.index).reshape(self.n, self.width)
 
 
 def vector3(rows: np.ndarray) -> np.ndarray:
