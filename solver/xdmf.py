@@ -318,6 +318,7 @@ class XDMFSeries:
         self._setup_gather()
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
+        self._collective(self._prepare_templates)
 
     @property
     def target(self) -> int | None:
@@ -525,15 +526,27 @@ class XDMFSeries:
         self._templates[slots] = _Template(slots, size, meta, offsets)
         return self._templates[slots]
 
+    def _chunk_slots(self, first: int) -> int:
+        """Levels in the chunk that starts at level ``first``: full chunks, the last one cut to the expected end."""
+        slots = max(1, min(MAX_LEVELS_PER_CHUNK, CHUNK_BYTES // max(1, self._slot_bytes())))
+        if self.target is not None and self.target > first:
+            slots = min(slots, self.target - first)
+        return slots
+
+    def _prepare_templates(self) -> None:
+        """Make the templates of the expected chunks now, so that no level pays for HDF5 (rank 0)."""
+        first = len(self.grids)
+        self._template(self._chunk_slots(first))
+        if self.target is not None and self.target > first:
+            full = self._chunk_slots(first)
+            self._template(self._chunk_slots(first + full * ((self.target - first - 1) // full)))
+
     def _new_chunk(self, first: int) -> None:
         """Create ``levels_<first>.h5`` (a copy of the template's metadata) and keep it open for raw writes."""
         if self.chunk is not None:
             os.close(self.chunk.fd)
             self.chunk = None
-        slots = max(1, min(MAX_LEVELS_PER_CHUNK, CHUNK_BYTES // max(1, self._slot_bytes())))
-        if self.target is not None and self.target > first:
-            slots = min(slots, self.target - first)
-        template = self._template(slots)
+        template = self._template(self._chunk_slots(first))
         path = self.data_dir / f"levels_{first:06d}.h5"
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)  # a chunk no listed level refers to
         try:
@@ -545,7 +558,7 @@ class XDMFSeries:
         except BaseException:
             os.close(fd)
             raise
-        self.chunk = _Chunk(first, slots, path, fd, template.offsets)
+        self.chunk = _Chunk(first, template.slots, path, fd, template.offsets)
 
     def _grid_xml(self) -> str:
         """The XML of one level with placeholders {t}, {file}, {slot}: topology and geometry from the mesh file."""
