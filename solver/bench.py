@@ -256,7 +256,7 @@ def _output_cases(results: dict, tmp: Path, nproc: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver bench", description=__doc__.splitlines()[0])
-    p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256])
+    p.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128, 256], help="n of the size cases (none: skip them)")
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
     p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference runs")
     p.add_argument("--no-output", action="store_true", help="skip the output cases (n = 32 and the 2000-level n = 128)")

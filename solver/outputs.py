@@ -18,7 +18,7 @@ from dolfinx.fem import petsc as fpetsc
 from .config import MaterialConfig, OutputConfig
 from .errors import OutputError, UsageError
 from .io import von_mises_array
-from .material import elasticity, strain
+from .material import lame, strain
 from .xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
@@ -28,32 +28,35 @@ KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stre
 class CellStresses:
     """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
 
-    For P1 displacements A eps(u) is constant on each cell: its average is one sparse product
-    G u with G assembled once (rows scaled by 1/|K|). The memory M lives at the points of the
-    quadrature rule that integrates it everywhere else; on affine cells its L2 projection onto
-    constants with that rule is the weighted mean of its point values. Rows are in the local
-    order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
+    For P1 displacements eps(u) is constant on each cell: its independent components are one
+    sparse product B u with B assembled once (rows scaled by 1/|K|; 12 entries per triangle),
+    and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
+    of the quadrature rule that integrates it everywhere else; on affine cells its L2
+    projection onto constants with that rule is the weighted mean of its point values. Rows
+    are in the local order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
     """
 
     def __init__(self, model, material: MaterialConfig) -> None:
         mesh = model.geo.mesh
         self.d = d = mesh.geometry.dim
         self.u, self.history = model.u, model.history
-        T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
-        du, tau = ufl.TrialFunction(model.u.function_space), ufl.TestFunction(T0)
-        self.G = fpetsc.assemble_matrix(fem.form(ufl.inner(elasticity(strain(du), material.E, material.nu,
-                                                                         material.model), tau) * ufl.dx))
-        self.G.assemble()
+        self.lam, self.mu = lame(material.E, material.nu, material.model)
+        self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
+        E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
+        eps = strain(ufl.TrialFunction(model.u.function_space))
+        components = ufl.as_vector([eps[i, j] for i, j in self.pairs])
+        self.B = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
+        self.B.assemble()
         S0 = fem.FunctionSpace(mesh, ("DG", 0))
         vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
-        scale = self.G.createVecLeft()
-        n_dofs = T0.dofmap.index_map.size_local
-        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], d * d)
-        self.G.diagonalScale(L=scale)
-        self.out = self.G.createVecLeft()
+        scale = self.B.createVecLeft()
+        n_dofs = E0.dofmap.index_map.size_local
+        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], len(self.pairs))
+        self.B.diagonalScale(L=scale)
+        self.out = self.B.createVecLeft()
         imap = mesh.topology.index_map(mesh.topology.dim)
         n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
-        self.cells = RowMap(T0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], d * d)  # DG0: one dof per cell
+        self.cells = RowMap(E0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], len(self.pairs))  # one dof per cell
         if self.history is not None:
             rule = model.rule
             npts = len(rule.weights)
@@ -63,8 +66,17 @@ class CellStresses:
 
     def elastic(self) -> np.ndarray:
         """A eps(u) per owned cell, rows of d*d (row-major)."""
-        self.G.mult(self.u.vector, self.out)
-        return self.cells.take(self.out.array_r)
+        self.B.mult(self.u.vector, self.out)
+        e = self.cells.take(self.out.array_r)
+        d = self.d
+        s = np.empty((len(e), d, d))
+        trace = e[:, :d].sum(axis=1)
+        for k, (i, j) in enumerate(self.pairs):
+            if i == j:
+                s[:, i, i] = 2.0 * self.mu * e[:, k] + self.lam * trace
+            else:
+                s[:, i, j] = s[:, j, i] = 2.0 * self.mu * e[:, k]
+        return s.reshape(len(e), d * d)
 
     def total(self, elastic: np.ndarray) -> np.ndarray:
         """sigma = A eps(u) + (cell average of M), given A eps(u)."""

@@ -37,6 +37,17 @@ visible only after its data are in the file.
   (amortized O(1)); ``close()`` rewrites it once the same way without padding and markers.
 Writes are not ``fsync``ed: they survive the death of the process, not of the machine.
 
+**Why not something simpler.** Appending datasets through an open HDF5 file (flushed after
+each level) leaves a window in which a kill corrupts the file's metadata, and with it levels
+already listed. HDF5's SWMR mode keeps the file consistent but cannot create datasets, and a
+killed writer leaves a flag that stops readers (``h5clear``). One HDF5 file per level is
+safe but makes thousands of files, and meshio's reader keeps each one open (past the usual
+limit of 1024 descriptors). Rewriting only the closing tags in one ``write`` is not atomic
+when the write spans two pages. Parallel HDF5 (``python3-h5py-mpi``) would add a package
+and still need the rows put into a partition-independent order; gathering to rank 0 costs
+less than the write itself here (measured by ``solver bench``: the files of 1 and 2 ranks
+agree to round-off, and the 2-rank write time per level is the serial one).
+
 **Restart.** ``XDMFSeries(..., keep_until=t)`` keeps the levels with time <= t, checks
 that ``fields/mesh.h5`` is this mesh, removes the data chunks no kept level refers to, and
 appends after the kept levels.

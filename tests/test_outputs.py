@@ -31,11 +31,11 @@ def projection(expr, mesh, dx) -> np.ndarray:
     return values[cell_dof]
 
 
-@pytest.mark.parametrize("degree", [1, 2])
-def test_cell_stresses_equal_the_assembled_projection(comm, degree):
+@pytest.mark.parametrize("degree,model", [(1, "plane_stress"), (2, "plane_stress"), (1, "plane_strain")])
+def test_cell_stresses_equal_the_assembled_projection(comm, degree, model):
     """Example 1 (memory, damage) after 5 steps, with 1- and 3-point memory rules, serial and on 2 ranks."""
     cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05",
-                                                f"solver.quadrature_degree={degree}"])
+                                                f"solver.quadrature_degree={degree}", f"material.model={model}"])
     model = build_model(cfg, comm)
     stepper = Stepper(model)
     for n in range(6):
