@@ -24,6 +24,7 @@ from mpi4py import MPI
 
 from .config import Config, OutputConfig, dumps
 from .errors import ConfigError
+from .io import on_rank0
 
 NAME = "checkpoint.h5"
 
@@ -97,25 +98,34 @@ def write(directory: Path, model, step: int, t: float, part: int) -> None:
     comm = model.comm
     fields = _fields(model)
     gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
-    if comm.rank == 0:
+
+    def save() -> None:
         import h5py
 
         path = Path(directory) / NAME
         tmp = path.with_name(NAME + ".tmp")
-        with h5py.File(tmp, "w") as h5:
-            h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
-                             **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
-                             **({f"damage_{k}": v for k, v in model.damage.scalars().items()} if model.damage else {})})
-            for name, parts in gathered.items():
-                coords = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts])
-                order = np.argsort(_keys(coords))
-                h5.create_dataset(f"{name}/coords", data=coords[order])
-                h5.create_dataset(f"{name}/values", data=values[order])
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
+        try:
+            with h5py.File(tmp, "w") as h5:
+                h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
+                                 **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
+                                 **({f"damage_{k}": v for k, v in model.damage.scalars().items()}
+                                    if model.damage else {})})
+                for name, parts in gathered.items():
+                    coords = np.concatenate([p[0] for p in parts])
+                    values = np.concatenate([p[1] for p in parts])
+                    order = np.argsort(_keys(coords))
+                    h5.create_dataset(f"{name}/coords", data=coords[order])
+                    h5.create_dataset(f"{name}/values", data=values[order])
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+        except Exception as exc:  # a full disk: the previous checkpoint stays as it was
+            tmp.unlink(missing_ok=True)
+            if isinstance(exc, OSError):
+                raise
+            raise OSError(f"{NAME}: {exc}") from exc
         os.replace(tmp, path)
-    comm.barrier()
+
+    on_rank0(comm, save)
 
 
 @dataclass

@@ -30,7 +30,7 @@ from .damage import Damage
 from .diagnostics import DamageDiagnostics
 from .errors import NonFiniteError, SolveFailure
 from .geometry import Geometry, build
-from .io import CSVWriter, merged_grids, write_text_atomic
+from .io import CSVWriter, on_rank0, write_text_atomic
 from .material import elasticity, lame
 from .mechanics import Mechanics
 from .memory import History, MemorySource, QuadratureRule, make_history, trapezoid_term
@@ -183,20 +183,21 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
     after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
-    it, and the new levels go to a new data part.
+    it, and the new levels are appended. A write that fails (a full disk) stops the run with
+    an OutputError that knows the step; what was written before stays readable.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
-    start, part, keep, prefix = 0, 0, None, None
+    start, part, keep, keep_until = 0, 0, None, None
     if restart:
         ckpt = checkpoint.read(outdir, model)
-        start, part = ckpt.step + 1, ckpt.part
+        start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
         if comm.rank == 0:
             keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
-            prefix = merged_grids(outdir, until=ckpt.t) if (outdir / "solution.xdmf").exists() else []
-    if outdir is not None and comm.rank == 0:
-        write_text_atomic(outdir / "config.toml", dumps(cfg))
-    out = Outputs(model, cfg.material, outdir if cfg.output.xdmf else None, part=part, prefix=prefix)
+    if outdir is not None:
+        on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
+    levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
+    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
@@ -204,17 +205,20 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     try:
         for n in range(start, steps + 1):
             row = stepper.step(n)
-            t0 = time.perf_counter()
-            if writes_level(n, steps, cfg.output.every):
-                out.write(row["t"])
-            row["time_output"] = time.perf_counter() - t0
-            row["wall_time"] = sum(row[c] for c in ("time_memory", "time_damage", "time_displacement",
-                                                    "time_diagnostics", "time_output"))
-            rows.append(row)
-            if csv is not None:
-                csv.write(row)
-            if every_ckpt and n < steps and n % every_ckpt == 0:
-                checkpoint.write(outdir, model, n, row["t"], part)
+            try:
+                t0 = time.perf_counter()
+                if writes_level(n, steps, cfg.output.every):
+                    out.write(row["t"])
+                row["time_output"] = time.perf_counter() - t0
+                row["wall_time"] = sum(row[c] for c in ("time_memory", "time_damage", "time_displacement",
+                                                        "time_diagnostics", "time_output"))
+                rows.append(row)
+                if csv is not None:
+                    on_rank0(comm, lambda row=row: csv.write(row))
+                if every_ckpt and n < steps and n % every_ckpt == 0:
+                    checkpoint.write(outdir, model, n, row["t"], part)
+            except SolveFailure as exc:
+                raise exc.at(n, row["t"]) from None
             if on_step is not None:
                 on_step(row)
     finally:
