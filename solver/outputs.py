@@ -86,7 +86,12 @@ class CellStresses:
         if self.history is None:
             return elastic
         dd = self.d * self.d
-        M = self.points.take(self.history.M.x.array)
+        memory = self.history.M.x.array
+        weight = getattr(self.history, "current_weight", None)
+        if weight is not None and float(weight.value) != 0.0:
+            # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
+            memory = memory + float(weight.value) * self.history.H()
+        M = self.points.take(memory)
         if self.npts == 1:  # one point per cell: the average is the value
             return elastic + M
         return elastic + (M.reshape(-1, self.npts, dd) * self.q_weights).sum(axis=1)

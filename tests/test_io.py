@@ -1,23 +1,9 @@
-"""Writers: cell averages, von Mises of arrays, CSV rows (one system call each), atomic small files."""
+"""Writers: von Mises of arrays, CSV rows (one system call each), atomic small files (cell stresses: test_outputs)."""
 
 import numpy as np
 import pytest
-import ufl
-from conftest import unit_mesh
-from dolfinx import fem
 
-from solver.io import CSV_COLUMNS, CellAverage, CSVWriter, von_mises_array, write_text_atomic
-
-
-def test_cell_average_of_a_linear_field_is_its_value_at_the_centroid(comm):
-    mesh = unit_mesh(comm, 3)
-    x = ufl.SpatialCoordinate(mesh)
-    target = fem.Function(fem.FunctionSpace(mesh, ("DG", 0)))
-    CellAverage(2.0 * x[0] + 3.0 * x[1], target, ufl.dx(metadata={"quadrature_degree": 2})).update()
-    V = target.function_space
-    n = V.dofmap.index_map.size_local
-    mids = mesh.geometry.x[mesh.geometry.dofmap.array.reshape(-1, 3)].mean(axis=1)[:n]
-    assert np.allclose(target.x.array[:n], 2.0 * mids[:, 0] + 3.0 * mids[:, 1], rtol=0, atol=1e-13)
+from solver.io import CSV_COLUMNS, CSVWriter, von_mises_array, write_text_atomic
 
 
 def test_von_mises_array_plane_and_3d():

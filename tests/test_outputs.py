@@ -54,3 +54,28 @@ def test_cell_stresses_equal_the_assembled_projection(comm, degree, model):
     fields = Outputs(model, mat, cfg.output, None).names  # no directory: nothing written, nothing built
     assert fields == ["displacement", "damage", "von_mises", "von_mises_elastic"]
     assert np.allclose(von_mises_array(got, 2), von_mises_array(want, 2), rtol=1e-13)
+
+
+@pytest.mark.parametrize("u_degree", [1, 2])
+def test_implicit_trapezoid_stress_includes_the_current_level(comm, u_degree):
+    """With memory.rule = "trapezoid" the history keeps the past only; sigma_n = A eps(u_n) + M_n + (k/2) g(0) H_n."""
+    from solver.memory import memory_source
+
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05", "memory.rule='trapezoid'",
+                                                f"discretization.u_degree={u_degree}"])
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(4):
+        stepper.step(n)
+    mesh, mat = model.geo.mesh, cfg.material
+
+    def A(e):
+        return elasticity(e, mat.E, mat.nu, mat.model)
+
+    weight = float(model.history.current_weight.value)
+    assert weight == pytest.approx(0.5 * 0.05 * 1.0)
+    H = memory_source(model.u, model.zeta, A, cfg.memory.L)
+    want = projection(A(strain(model.u)) + model.history.M + weight * H, mesh, model.rule.dx)
+    cs = CellStresses(model, mat)
+    got = cs.total(cs.elastic())
+    assert np.allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())

@@ -1,11 +1,10 @@
-"""Post-processing helpers: point values on any rank, matching orderings, reading the CSV back."""
+"""Post-processing helpers: point values on any rank, reading the CSV back (the series: test_xdmf)."""
 
-import numpy as np
 import pytest
 from conftest import unit_mesh
 from dolfinx import fem
 
-from solver.post import _match, point_value, read_csv
+from solver.post import point_value, read_csv
 
 
 def test_point_value_is_the_same_on_every_rank_and_refuses_outside(comm):
@@ -15,16 +14,6 @@ def test_point_value_is_the_same_on_every_rank_and_refuses_outside(comm):
     assert point_value(f, [0.3, 0.7])[0] == pytest.approx(1.0 + 0.6 - 0.7)
     with pytest.raises(ValueError, match="outside"):
         point_value(f, [2.0, 0.5])
-
-
-def test_match_finds_the_permutation_and_rejects_another_mesh():
-    ref = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
-    perm = np.array([2, 0, 3, 1])
-    pts = ref[perm]
-    idx = _match(ref, pts)
-    assert np.array_equal(pts[idx], ref)
-    with pytest.raises(ValueError):
-        _match(ref, pts + 0.5)
 
 
 def test_read_csv(tmp_path):
