@@ -126,10 +126,13 @@ class NonFiniteError(SolveFailure):
 
 
 class OutputError(SolveFailure):
-    """Writing the results failed (a full disk, a vanished directory); what was written before stays readable."""
+    """Writing the results failed (a full disk, a vanished directory); what was written before stays readable.
+
+    ``level_t``: the time of the level whose write failed, when it is known (levels are written in
+    the background, so the failure may be found a few levels later; the stepper reports this one)."""
 
     status = "output_failed"
 
-    def __init__(self, reason: str) -> None:
-        self.reason = reason
+    def __init__(self, reason: str, level_t: float | None = None) -> None:
+        self.reason, self.level_t = reason, level_t
         super().__init__(f"writing results failed: {reason}")

@@ -154,11 +154,25 @@ class Outputs:
         try:
             self.series.write(t, values)
         except SeriesError as exc:
-            raise OutputError(str(exc)) from None
+            raise OutputError(str(exc), exc.t) from None
 
-    def close(self) -> None:
+    def flush(self) -> None:
+        """Wait until every level is written (they are written in the background); raise a failed one's OutputError."""
         if self.series is not None:
+            try:
+                self.series.flush()
+            except SeriesError as exc:
+                raise OutputError(str(exc), exc.t) from None
+
+    def close(self, quiet: bool = False) -> None:
+        """Finish the series; ``quiet``: a failure is not raised (another one is already on its way)."""
+        if self.series is None:
+            return
+        try:
             self.series.close()
+        except SeriesError as exc:
+            if not quiet:
+                raise OutputError(str(exc), exc.t) from None
 
 
 def _vertex_values(f: fem.Function):

@@ -28,7 +28,7 @@ from . import checkpoint
 from .config import Config, dumps
 from .damage import Damage
 from .diagnostics import DamageDiagnostics
-from .errors import NonFiniteError, SolveFailure
+from .errors import NonFiniteError, OutputError, SolveFailure
 from .geometry import Geometry, build
 from .io import CSVWriter, on_rank0, write_text_atomic
 from .material import elasticity, lame
@@ -202,13 +202,14 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
     rows: list[dict] = []
+    finished = False
     try:
         for n in range(start, steps + 1):
             row = stepper.step(n)
             try:
                 t0 = time.perf_counter()
                 if writes_level(n, steps, cfg.output.every):
-                    out.write(row["t"])
+                    out.write(row["t"])  # handed to the background writer (solver/xdmf.py)
                 row["time_output"] = time.perf_counter() - t0
                 row["wall_time"] = sum(row[c] for c in ("time_memory", "time_damage", "time_displacement",
                                                         "time_diagnostics", "time_output"))
@@ -216,16 +217,29 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
                 if csv is not None:
                     on_rank0(comm, lambda row=row: csv.write(row))
                 if every_ckpt and n < steps and n % every_ckpt == 0:
+                    out.flush()  # a checkpoint never runs ahead of the written series
                     checkpoint.write(outdir, model, n, row["t"], part)
             except SolveFailure as exc:
-                raise exc.at(n, row["t"]) from None
+                raise _located(exc, n, row["t"], cfg.time.k) from None
             if on_step is not None:
                 on_step(row)
+        try:
+            out.close()
+        except SolveFailure as exc:
+            raise _located(exc, steps, steps * cfg.time.k, cfg.time.k) from None
+        finished = True
     finally:
-        out.close()
+        out.close(quiet=not finished)
         if csv is not None:
             csv.close()
     return rows
+
+
+def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:
+    """The failure at level n, or, for a write done in the background, at the level whose write failed."""
+    if isinstance(exc, OutputError) and exc.level_t is not None:
+        return exc.at(round(exc.level_t / k), exc.level_t)
+    return exc.at(n, t)
 
 
 def _csv_lines_until(path: Path, step: int) -> list[str]:

@@ -140,10 +140,12 @@ def test_every_byte_state_of_the_xml_is_valid(tmp_path):
     w = scene.series(tmp_path, expected_levels=4)
     path = tmp_path / "solution.xdmf"
     w.write(0.0, scene.values(0.0))
+    w.flush()  # levels are written in the background: flush() gives the state on disk
     checked = 0
     for k, t in enumerate([0.5, 1.0, 1.5], start=1):
         before, cursor, flip = path.read_bytes(), w.cursor, w.flip
         w.write(t, scene.values(t))
+        w.flush()
         after = path.read_bytes()
         unit = after[cursor: w.cursor]
         assert len(after) == len(before) and after[flip:flip + 1] == b"<" and before[flip:flip + 1] == b" "
@@ -172,6 +174,7 @@ def test_padding_and_chunks_grow_without_a_known_length(tmp_path, monkeypatch):
     inodes = set()
     for t in times:
         w.write(t, scene.values(t))
+        w.flush()
         inodes.add((tmp_path / "solution.xdmf").stat().st_ino)
     assert 2 <= len(inodes) <= 6  # renewed a few times (geometric growth), not at every level
     check_values(read_series(tmp_path / "solution.xdmf"), times)
