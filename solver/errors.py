@@ -122,3 +122,14 @@ class NonFiniteError(SolveFailure):
     def __init__(self, fields: list[str]) -> None:
         self.fields = sorted(set(fields))
         super().__init__(f"non-finite values in {', '.join(self.fields)}")
+
+
+class RigidMotionError(SolveFailure):
+    """The Dirichlet parts leave a rigid motion free, so the stiffness matrix is singular (found before solving)."""
+
+    status = "singular"
+
+    def __init__(self, motions: list[str]) -> None:
+        self.motions = list(motions)
+        super().__init__("the Dirichlet parts leave a rigid motion free (" + "; ".join(self.motions) + "): "
+                         "the stiffness matrix is singular; fix more displacement components")

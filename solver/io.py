@@ -186,22 +186,26 @@ def merged_grids(directory: Path, until: float | None = None) -> list:
 class CSVWriter:
     """Rows of the time series, written by rank 0, each row one ``write()`` of a whole line.
 
+    ``columns``: CSV_COLUMNS and the scene's own (the reactions of its Dirichlet parts).
+
     The file is opened in append mode and every row goes out in a single system call, so
     a killed run leaves only complete rows. ``keep`` lines (a restart's rows up to its
     checkpoint, as written) are rewritten first, atomically.
     """
 
-    def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None) -> None:
+    def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None,
+                 columns: tuple[str, ...] = CSV_COLUMNS) -> None:
         self.comm = comm
         self.fd = None
+        self.columns = columns
         if comm.rank == 0:
-            text = ",".join(CSV_COLUMNS) + "\n" + "".join(keep or [])
+            text = ",".join(columns) + "\n" + "".join(keep or [])
             write_text_atomic(path, text)
             self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
 
     def write(self, row: dict) -> None:
         if self.fd is not None:
-            os.write(self.fd, _line(row).encode())
+            os.write(self.fd, _line(row, self.columns).encode())
 
     def close(self) -> None:
         if self.fd is not None:
@@ -209,8 +213,8 @@ class CSVWriter:
             self.fd = None
 
 
-def _line(row: dict) -> str:
-    return ",".join(_fmt(row[k]) for k in CSV_COLUMNS) + "\n"
+def _line(row: dict, columns: tuple[str, ...] = CSV_COLUMNS) -> str:
+    return ",".join(_fmt(row[k]) for k in columns) + "\n"
 
 
 def _fmt(v) -> str:

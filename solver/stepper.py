@@ -30,7 +30,7 @@ from .damage import Damage
 from .diagnostics import DamageDiagnostics
 from .errors import NonFiniteError, SolveFailure
 from .geometry import Geometry, build
-from .io import CSVWriter, merged_grids, write_text_atomic
+from .io import CSV_COLUMNS, CSVWriter, merged_grids, write_text_atomic
 from .material import elasticity, lame
 from .mechanics import Mechanics
 from .memory import History, MemorySource, QuadratureRule, make_history, trapezoid_term
@@ -80,7 +80,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     implicit = None
     if history is not None and cfg.memory.rule == "trapezoid":
         implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
-    mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit)
+    mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit,
+                     body_force=cfg.body_force)
     return Model(cfg, geo, u, zeta, damage, history, rule, mech)
 
 
@@ -165,7 +166,8 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     if outdir is not None and comm.rank == 0:
         write_text_atomic(outdir / "config.toml", dumps(cfg))
     out = Outputs(model, cfg.material, outdir if cfg.output.xdmf else None, part=part, prefix=prefix)
-    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep) if outdir is not None else None
+    columns = CSV_COLUMNS + model.mech.diagnostics.columns
+    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
     rows: list[dict] = []
