@@ -53,9 +53,13 @@ class CellAverage:
         self.target.x.scatter_forward()
 
 
-def von_mises_array(s: np.ndarray, dim: int) -> np.ndarray:
-    """von Mises of an array of tensors (n, dim*dim): the paper's plane formula in 2-D."""
+def von_mises_array(s: np.ndarray, dim: int, s33: np.ndarray | None = None) -> np.ndarray:
+    """von Mises of an array of tensors (n, dim*dim): the paper's plane formula in 2-D; with the
+    out-of-plane stresses ``s33`` (plane strain) the full one, sqrt(((a-b)^2 + (b-c)^2 + (c-a)^2)/2 + 3 t^2)."""
     s = s.reshape(-1, dim, dim)
+    if dim == 2 and s33 is not None:
+        a, b, c, t = s[:, 0, 0], s[:, 1, 1], s33, s[:, 0, 1]
+        return np.sqrt(((a - b) ** 2 + (b - c) ** 2 + (c - a) ** 2) / 2 + 3 * t * t)
     if dim == 2:
         a, b, c = s[:, 0, 0], s[:, 1, 1], s[:, 0, 1]
         return np.sqrt(a * a + b * b - a * b + 3 * c * c)

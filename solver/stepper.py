@@ -33,7 +33,15 @@ from .geometry import Geometry, build
 from .io import CSV_COLUMNS, CSVWriter, merged_grids, write_text_atomic
 from .material import elasticity, lame
 from .mechanics import Mechanics
-from .memory import History, MemorySource, QuadratureRule, make_history, trapezoid_term
+from .memory import (
+    History,
+    MemorySource,
+    OutOfPlaneSource,
+    PlaneStrainHistory,
+    QuadratureRule,
+    make_history,
+    trapezoid_term,
+)
 from .outputs import Outputs
 
 
@@ -80,6 +88,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     implicit = None
     if history is not None and cfg.memory.rule == "trapezoid":
         implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
+    if history is not None and mat.model == "plane_strain":  # sigma_33 has a memory part too
+        history = PlaneStrainHistory(history, make_history(cfg.memory, rule, OutOfPlaneSource(rule, source), k, steps))
     mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit,
                      body_force=cfg.body_force)
     return Model(cfg, geo, u, zeta, damage, history, rule, mech)
