@@ -112,3 +112,23 @@ def test_outputs_open_with_meshio(tmp_path):
     # the resolved config reproduces the run
     again = load(out / "config.toml")
     assert again.mesh.nx == 4 and again.time.k == 0.25
+
+
+def test_foundation_scene_balances_and_spreads(comm):
+    """configs/foundation.toml (coarser): the plate, the foundation and gravity are in equilibrium at every
+    level (reaction_top_y + contact force + f_y |Omega| = 0; no net horizontal force on the symmetry plane),
+    the contact zone spreads as the plate goes down, and sigma_33 is part of the plane-strain output."""
+    from solver.outputs import Outputs
+
+    cfg = load(ROOT / "configs/foundation.toml", ["mesh.nx=20", "mesh.ny=10", "time.k=0.1"])
+    model, rows = solve(cfg, comm)
+    weight = cfg.body_force.f[0][2] * 2.0  # f_y times the area of (0,2) x (0,1)
+    for r in rows:
+        assert r["reaction_top_y"] + r["contact_force"] + weight == pytest.approx(0.0, abs=1e-10 * r["contact_force"])
+        assert abs(r["reaction_left_x"]) < 1e-10 * r["contact_force"]
+    lengths = [r["contact_length"] for r in rows]
+    assert lengths[0] < 1.5 and lengths[-1] > lengths[0] + 0.5 and lengths == sorted(lengths)
+    assert rows[0]["reaction_top_y"] > 0 > rows[-1]["reaction_top_y"]  # holds the slab up, then pushes it down
+    out = Outputs(model, cfg.material, None)
+    out.update_cell_fields()
+    assert [f.name for f in out.zz] == ["stress_zz", "elastic_stress_zz"]
