@@ -26,7 +26,8 @@ class Reactions:
 
     R = K_full u + j(u) + B M_n (+ the trapezoid's implicit memory term) - (f_n, w): the residual
     with no Dirichlet row replaced, so on a Dirichlet dof it is the force the support must add
-    for equilibrium. Summed over the dofs the part carries (:class:`operators.Dirichlet`).
+    for equilibrium. Summed over the dofs the part carries (:class:`operators.Dirichlet`); K_full
+    is kept as its Dirichlet rows only, so the product costs their entries alone.
     """
 
     def __init__(self, problem: DisplacementProblem) -> None:
@@ -35,8 +36,17 @@ class Reactions:
         ops = problem.ops
         self.dirichlet = ops.dirichlet
         self.columns = self.dirichlet.columns
-        self.K = fpetsc.assemble_matrix(ops.bulk_form)  # no Dirichlet rows or columns removed
-        self.K.assemble()
+        K = fpetsc.assemble_matrix(ops.bulk_form)  # no Dirichlet rows or columns removed
+        K.assemble()
+        # only the Dirichlet rows of K u are needed: keep those (local row j is the owned dof constrained[j])
+        start, end = K.getOwnershipRange()
+        constrained = self.dirichlet.constrained
+        rows = PETSc.IS().createGeneral((constrained + start).astype(PETSc.IntType), comm=self.comm)
+        cols = PETSc.IS().createStride(end - start, start, 1, comm=self.comm)
+        self.K = K.createSubMatrix(rows, cols)
+        K.destroy()
+        self.Ku = self.K.createVecLeft()
+        self.position = {key: np.searchsorted(constrained, dofs) for key, dofs in self.dirichlet.dofs.items()}
         self.R = ops.b.duplicate()
         self.contact_form = problem.contact.residual_form if problem.contact is not None else None
 
@@ -48,12 +58,12 @@ class Reactions:
             if form is not None:
                 fpetsc.assemble_vector(R, form)
         R.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.K.multAdd(self.problem.u.vector, R, R)
         if ops.memory_force is not None:
             R.axpy(1.0, ops.memory_force)
         R.axpy(-1.0, ops.loads)
-        values = R.array_r
-        local = np.array([values[dofs].sum() for dofs in self.dirichlet.dofs.values()])
+        self.K.mult(self.problem.u.vector, self.Ku)
+        values, Ku = R.array_r, self.Ku.array_r
+        local = np.array([values[dofs].sum() + Ku[self.position[key]].sum() for key, dofs in self.dirichlet.dofs.items()])
         total = self.comm.allreduce(local, op=MPI.SUM) if len(local) else local
         return dict(zip(self.dirichlet.dofs, (float(v) for v in total)))
 
