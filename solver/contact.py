@@ -27,7 +27,7 @@ def normal_compliance(r, mu: float):
     return ufl.max_value(r, 0.0) / mu
 
 
-def compliance(r, part: BoundaryConfig):
+def compliance(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Expr:
     """p(r) of the part's law (linear: exactly :func:`normal_compliance`)."""
     if part.law == "linear":
         return normal_compliance(r, part.mu)
@@ -41,7 +41,7 @@ def penetration(u, n, gap):
     return ufl.dot(u, n) - gap
 
 
-def gap_function(part: BoundaryConfig, mesh):
+def gap_function(part: BoundaryConfig, mesh) -> float | ufl.core.expr.Expr:
     """The part's gap: its number, or its table [s, g] as g_0 + sum of ramps clamped to [s_i, s_{i+1}]
     (piecewise linear, constant beyond the table) in the coordinate ``gap_coordinate``."""
     if not part.gap_table:

@@ -44,6 +44,8 @@ SCENES = {
     "example1": ["--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.05", "--set", "output.every=5"],
     "example2": ["--set", "time.k=0.05", "--set", "output.every=10"],
     "example3": ["--set", "time.k=0.05", "--set", "output.every=5"],
+    # moving Dirichlet values, reactions, the power law, a gap table, gravity, plane strain
+    "foundation": ["--set", "mesh.nx=20", "--set", "mesh.ny=10", "--set", "time.k=0.1", "--set", "output.every=5"],
 }
 
 
@@ -76,8 +78,9 @@ def test_parallel_equals_serial(tmp_path, serial_runs, scene, nproc):
     for t in a["times"]:
         for name in ("displacement", "damage"):
             assert np.allclose(by_node(a, name, t), by_node(b, name, t), rtol=0, atol=1e-8), (name, t)
-        for name in ("stress", "elastic_stress", "von_mises", "von_mises_elastic"):
-            assert np.allclose(by_cell(a, name, t), by_cell(b, name, t), rtol=0, atol=1e-8), (name, t)
+        for name in ("stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz"):
+            if name in a["fields"]:
+                assert np.allclose(by_cell(a, name, t), by_cell(b, name, t), rtol=0, atol=1e-8), (name, t)
     ra, rb = read_csv(serial_runs(scene) / "timeseries.csv"), read_csv(tmp_path / "p/timeseries.csv")
     assert len(ra) == len(rb)
     for x, y in zip(ra, rb):
