@@ -1,7 +1,7 @@
 """Mesh for Example 2 of Campo, Fernandez & Rodriguez-Aros (2008).
 
 Omega = (0,3) x (0,2)  [assumed: the paper prints "[0,2]x[0,3]", but its
-boundary parts only fit (0,3) x (0,2); see MODEL.md section 4].
+boundary parts only fit (0,3) x (0,2); see docs/model.md §5 and §6].
 
 Physical groups written to the .msh file:
   dimension 2: "domain"    the whole rectangle (dolfinx needs it to get cells)

@@ -1,7 +1,7 @@
 """Mesh for Example 3 of Campo, Fernandez & Rodriguez-Aros (2008).
 
 Omega = (0,2) x (0,1)  [assumed: the paper's Fig. 7 geometry is not in the
-text; see MODEL.md section 4].
+text; see docs/model.md §5 and §6].
 
 Physical groups written to the .msh file:
   dimension 2: "domain"    the whole rectangle (dolfinx needs it to get cells)

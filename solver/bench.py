@@ -1,10 +1,14 @@
-"""Benchmark of the time loop: time per step against a floor measured in the same run.
+"""Benchmark of the time loop: time per step against a floor measured in the same run, and the cost of output.
 
 ``python -m solver bench`` runs Example 1 (k = 0.01, 100 steps) at several n, each case
 in its own process (so peak memory is per case), serially and under ``mpirun -n 2``,
-then the reference run of the convergence study (n = 256, k = 0.0005, 2000 steps) and
-the memory-flatness check for the constant and exponential kernels. It writes
-``bench.json`` and ``bench.md``.
+writing every level (the output column is that write, XDMF included). Then the output
+cases: Example 1 at n = 32, k = 0.001 writing every level against writing none (whole run,
+1 and 2 ranks, and the two runs' files compared), and n = 128, k = 0.0005 (2,000 levels)
+written at every level, with the write time per level at the first and the last levels.
+Then the reference run of the convergence study (n = 256, k = 0.0005, 2000 steps),
+unwritten and with every 10th level written, and the memory-flatness check for the
+constant and exponential kernels. It writes ``bench.json`` and ``bench.md``.
 
 The floor is what any implementation of the scheme must pay per step: one triangular
 solve pair of the factored displacement matrix, one of the damage matrix, and one
@@ -17,8 +21,10 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -26,6 +32,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE1 = ROOT / "configs" / "example1.toml"
+# discretization variants of the constant-kernel case: "<space>-order<k>" (P2 at n has the dofs of P1 at 2n)
+VARIANTS = {"p1-order2": ["time.order=2"], "p2-order1": ["discretization.u_degree=2"],
+            "p2-order2": ["discretization.u_degree=2", "time.order=2"]}
 PHASES = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output")
 
 
@@ -41,25 +50,59 @@ def _median_time(fn, comm, reps: int = 20) -> float:
     return float(np.median(ts))
 
 
-def run_case(n: int, k: float, T: float, kernel: str = "constant") -> dict:
-    """One benchmark case in this process; returns its figures (same on every rank)."""
+def _window(rows: list[dict], steps: list[int], key: str = "time_output") -> float:
+    """Median of ``key`` over the rows of the given steps (ms)."""
+    picked = [r[key] for r in rows if r["step"] in set(steps)]
+    return 1e3 * float(np.median(picked))
+
+
+def _disk_bytes(directory: Path) -> int:
+    """Bytes the results take on disk (allocated blocks: the data chunks are sparse until written)."""
+    return sum(p.stat().st_blocks * 512 for p in directory.rglob("*") if p.is_file())
+
+
+def run_case(n: int, k: float, T: float, kernel: str = "constant", every: int | None = None,
+             outdir: str | None = None) -> dict:
+    """One benchmark case in this process; returns its figures (same on every rank).
+
+    ``every`` None: nothing is written (no directory); else the run writes to ``outdir`` with
+    ``output.every = every`` and its other output settings at their defaults.
+    """
     from mpi4py import MPI
 
     from .config import load
-    from .stepper import build_model, run
+    from .stepper import build_model, run, writes_level
 
     comm = MPI.COMM_WORLD
-    sets = [f"mesh.nx={n}", f"mesh.ny={n}", f"time.k={k}", f"time.T={T}", "output.xdmf=false"]
+    sets = [f"mesh.nx={n}", f"mesh.ny={n}", f"time.k={k}", f"time.T={T}"]
+    sets += ["output.xdmf=false"] if every is None else [f"output.every={every}"]
     if kernel == "exponential":
         sets += ["memory.kernel='exponential'", "memory.weights=[-1.0]", "memory.times=[1.0]"]
+    sets += VARIANTS.get(kernel, [])
     cfg = load(EXAMPLE1, sets)
     t0 = time.perf_counter()
     model = build_model(cfg, comm)
     t_build = time.perf_counter() - t0
+    directory = Path(outdir) if every is not None else None
+    if directory is not None and comm.rank == 0:
+        directory.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
     t0 = time.perf_counter()
-    rows = run(model)
+    rows = run(model, directory)
     t_run = time.perf_counter() - t0
     steady = rows[1:]  # level 0 holds the first factorizations
+    steps = cfg.time.steps
+    output = None
+    if every is not None:
+        written = [r["step"] for r in rows if writes_level(r["step"], steps, every)]
+        output = {"every": every, "levels": len(written), "fields": list(cfg.output.fields),
+                  "disk_bytes": _disk_bytes(directory) if comm.rank == 0 else 0}
+        if len(written) > 16:  # the write time per level around the 10th written level and over the last 11
+            first, last = written[5:16], written[-11:]
+            output.update({"first_ms": _window(rows, first), "last_ms": _window(rows, last),
+                           "first_step_ms": _window(rows, first, "wall_time"), "last_step_ms": _window(rows, last, "wall_time"),
+                           "first_window": [first[0], first[-1]], "last_window": [last[0], last[-1]]})
+        output["disk_bytes"] = comm.bcast(output["disk_bytes"], root=0)
 
     mech, dmg = model.mech, model.damage
     ksp = mech.solver.snes.getKSP()
@@ -72,7 +115,7 @@ def run_case(n: int, k: float, T: float, kernel: str = "constant") -> dict:
     }
     floor["total"] = sum(floor.values())
     split = {p: float(np.median([r[p] for r in steady])) for p in PHASES}
-    step = float(np.median([r["wall_time"] for r in steady]))
+    step = float(np.median([r["wall_time"] - r["time_output"] for r in steady]))  # the output is reported apart
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MiB
     return {
         "n": n, "k": k, "steps": cfg.time.steps, "kernel": kernel, "nproc": comm.size,
@@ -88,12 +131,16 @@ def run_case(n: int, k: float, T: float, kernel: str = "constant") -> dict:
         "peak_mib_max": comm.allreduce(peak, op=MPI.MAX),
         "peak_mib_sum": comm.allreduce(peak, op=MPI.SUM),
         "final": {key: rows[-1][key] for key in ("contact_force", "zeta_min", "strain_norm", "zeta_norm")},
+        "output": output,
     }
 
 
-def _spawn(n: int, k: float, T: float, kernel: str, nproc: int) -> dict:
+def _spawn(n: int, k: float, T: float, kernel: str, nproc: int, every: int | None = None,
+           outdir: Path | None = None) -> dict:
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = [sys.executable, "-m", "solver.bench", "case", str(n), str(k), str(T), kernel]
+    if every is not None:
+        cmd += [str(every), str(outdir)]
     if nproc > 1:
         cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
     res = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
@@ -104,20 +151,43 @@ def _spawn(n: int, k: float, T: float, kernel: str, nproc: int) -> dict:
 
 def _table(results: dict) -> str:
     lines = [
-        "| n | ranks | u dofs | step (ms) | damage | memory | displacement | diagnostics | output | floor (ms) "
-        "| step / floor | Newton/step | factorizations/step | peak MiB (max rank) |",
+        "| n | ranks | u dofs | step (ms) | damage | memory | displacement | diagnostics | floor (ms) "
+        "| step / floor | output (ms) | Newton/step | factorizations/step | peak MiB (max rank) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in results["sizes"]:
         s = c["split_ms"]
         lines.append(
             f"| {c['n']} | {c['nproc']} | {c['dofs_u']} | {c['step_ms']:.2f} | {s['damage']:.2f} | {s['memory']:.2f} "
-            f"| {s['displacement']:.2f} | {s.get('diagnostics', float('nan')):.2f} | {s['output']:.2f} "
-            f"| {c['floor_ms']['total']:.2f} | {c['ratio']:.2f} "
+            f"| {s['displacement']:.2f} | {s.get('diagnostics', float('nan')):.2f} "
+            f"| {c['floor_ms']['total']:.2f} | {c['ratio']:.2f} | {s['output']:.2f} "
             f"| {c['newton_per_step']:.2f} | {c['factorizations_per_step']:.3f} | {c['peak_mib_max']:.0f} |"
         )
     out = ["## Time per step (Example 1, k = 0.01, 100 steps; medians over steps 1-100)", "", *lines, ""]
-    out += ["Floor = displacement solve + damage solve + assembly of both right-hand sides (medians of 20, same run).", ""]
+    out += ["Floor = displacement solve + damage solve + assembly of both right-hand sides (medians of 20, same run). "
+            "Step = the step without its output; output = writing the level (default fields, XDMF included), "
+            "every level written.", ""]
+    o = results.get("output", {})
+    if o:
+        out += ["## Output: Example 1, n = 32, k = 0.001 (1,001 levels), every level written against none", "",
+                "| ranks | whole run, every = 1 (s) | every = 0 (s) | ratio | write per level, levels 5-15 (ms) "
+                "| levels 990-1000 (ms) | on disk (MiB) |", "|---|---|---|---|---|---|---|"]
+        for key in sorted(k for k in o if k.startswith("n32_np")):
+            w, z = o[key]["written"], o[key]["unwritten"]
+            out.append(f"| {w['nproc']} | {w['build_s'] + w['run_s']:.2f} | {z['build_s'] + z['run_s']:.2f} "
+                       f"| {o[key]['ratio']:.2f} | {w['output']['first_ms']:.3f} | {w['output']['last_ms']:.3f} "
+                       f"| {w['output']['disk_bytes'] / 2**20:.0f} |")
+        out.append("")
+        if "n32_serial_vs_parallel" in o:
+            out += [f"Largest difference between the fields written by 1 and 2 ranks (every level): "
+                    f"{o['n32_serial_vs_parallel']:.1e}.", ""]
+        if "n128" in o:
+            c = o["n128"]["output"]
+            out += ["## Output: n = 128, k = 0.0005 (2,001 levels), every level written", "",
+                    f"- write per level (median): {c['first_ms']:.2f} ms at levels {_span(c['first_window'])}, "
+                    f"{c['last_ms']:.2f} ms at levels {_span(c['last_window'])} (ratio "
+                    f"{c['last_ms'] / c['first_ms']:.2f}); the whole step "
+                    f"{c['first_step_ms']:.2f} -> {c['last_step_ms']:.2f} ms; {c['disk_bytes'] / 2**20:.0f} MiB on disk", ""]
     sp = results.get("speedup", {})
     if sp:
         out += ["## mpirun -n 2 against one process (time per step)", "", "| n | 1 rank (ms) | 2 ranks (ms) | speed-up "
@@ -131,6 +201,20 @@ def _table(results: dict) -> str:
                 f"- total {ref['build_s'] + ref['run_s']:.1f} s (set-up {ref['build_s']:.1f} s, level 0 "
                 f"{ref['level0_s']:.1f} s, {ref['step_ms']:.1f} ms per step, step / floor {ref['ratio']:.2f}); "
                 f"peak memory {ref['peak_mib_max']:.0f} MiB", ""]
+        r10 = results.get("reference_every10")
+        if r10:
+            out += [f"- with every 10th level written: {r10['build_s'] + r10['run_s']:.1f} s, {r10['ratio']:.2f}x the "
+                    f"unwritten run ({r10['output']['disk_bytes'] / 2**20:.0f} MiB on disk)", ""]
+    disc = results.get("discretizations", [])
+    if disc:
+        out += ["## Discretizations (Example 1, k = 0.01, 100 steps, one process, nothing written)", "",
+                "| case | n | u dofs | step (ms) | damage | memory | displacement | floor (ms) | step / floor |",
+                "|---|---|---|---|---|---|---|---|---|"]
+        for c in disc:
+            s = c["split_ms"]
+            out.append(f"| {c['kernel']} | {c['n']} | {c['dofs_u']} | {c['step_ms']:.2f} | {s['damage']:.2f} "
+                       f"| {s['memory']:.2f} | {s['displacement']:.2f} | {c['floor_ms']['total']:.2f} | {c['ratio']:.2f} |")
+        out.append("")
     mem = results.get("memory_flat", [])
     if mem:
         out += ["## Memory against the number of steps", "", "| kernel | n | steps | peak MiB |", "|---|---|---|---|"]
@@ -140,40 +224,106 @@ def _table(results: dict) -> str:
     return "\n".join(out)
 
 
+def _max_difference(a_dir: Path, b_dir: Path) -> float:
+    """Largest difference between two runs' written fields, over every level (inf if the levels differ)."""
+    from .post import read_results
+
+    a, b = read_results(a_dir), read_results(b_dir)
+    if a["times"] != b["times"] or set(a["fields"]) != set(b["fields"]):
+        return float("inf")
+    return max(float(np.abs(a["fields"][f][t] - b["fields"][f][t]).max()) for f in a["fields"] for t in a["times"])
+
+
+def _span(window: list[int]) -> str:
+    return f"{window[0]}-{window[1]}"
+
+
+def _output_cases(results: dict, tmp: Path, nproc: int) -> None:
+    """Example 1, n = 32, k = 0.001: every level written against none (1 and ``nproc`` ranks); n = 128, 2000 levels."""
+    out = results["output"]
+    for ranks in [1] + ([nproc] if nproc > 1 else []):
+        written = _spawn(32, 0.001, 1.0, "constant", ranks, 1, tmp / f"n32-np{ranks}")
+        unwritten = _spawn(32, 0.001, 1.0, "constant", ranks, 0, tmp / f"n32-np{ranks}-every0")
+        whole = (written["build_s"] + written["run_s"]) / (unwritten["build_s"] + unwritten["run_s"])
+        out[f"n32_np{ranks}"] = {"written": written, "unwritten": unwritten, "ratio": whole}
+        w = written["output"]
+        print(f"output n=32 k=0.001 {ranks} rank(s): every=1 {written['build_s'] + written['run_s']:.2f} s, every=0 "
+              f"{unwritten['build_s'] + unwritten['run_s']:.2f} s, ratio {whole:.2f}; write per level "
+              f"{w['first_ms']:.3f} ms at levels {_span(w['first_window'])}, {w['last_ms']:.3f} ms at levels "
+              f"{_span(w['last_window'])}", flush=True)
+    if nproc > 1:
+        out["n32_serial_vs_parallel"] = _max_difference(tmp / "n32-np1", tmp / f"n32-np{nproc}")
+        print(f"output n=32: largest difference of the written fields, 1 vs {nproc} ranks: "
+              f"{out['n32_serial_vs_parallel']:.1e}", flush=True)
+    for d in tmp.iterdir():
+        shutil.rmtree(d)
+    long = _spawn(128, 0.0005, 1.0, "constant", 1, 1, tmp / "n128")
+    out["n128"] = long
+    o = long["output"]
+    print(f"output n=128 k=0.0005 ({o['levels']} levels): write per level {o['first_ms']:.2f} ms at levels "
+          f"{_span(o['first_window'])}, {o['last_ms']:.2f} ms at levels {_span(o['last_window'])} "
+          f"(ratio {o['last_ms'] / o['first_ms']:.2f});"
+          f" step with output {o['first_step_ms']:.2f} -> {o['last_step_ms']:.2f} ms; {o['disk_bytes'] / 2**20:.0f} MiB",
+          flush=True)
+    shutil.rmtree(tmp / "n128")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver bench", description=__doc__.splitlines()[0])
-    p.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128, 256])
+    p.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128, 256], help="n of the size cases (none: skip them)")
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
-    p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference run")
+    p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference runs")
+    p.add_argument("--no-discretizations", action="store_true", help="skip the P2 / second-order cases")
+    p.add_argument("--no-output", action="store_true", help="skip the output cases (n = 32 and the 2000-level n = 128)")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
     args = p.parse_args(argv)
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
-    results: dict = {"sizes": [], "speedup": {}, "memory_flat": [], "machine": os.uname().nodename,
+    results: dict = {"sizes": [], "speedup": {}, "memory_flat": [], "output": {}, "machine": os.uname().nodename,
                      "cores": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M")}
-    for n in args.sizes:
-        c = _spawn(n, 0.01, 1.0, "constant", 1)
-        results["sizes"].append(c)
-        print(f"n={n:4d} 1 rank : {c['step_ms']:7.2f} ms/step, floor {c['floor_ms']['total']:6.2f} ms, "
-              f"ratio {c['ratio']:.2f}", flush=True)
-        if args.nproc > 1:
-            q = _spawn(n, 0.01, 1.0, "constant", args.nproc)
-            results["sizes"].append(q)
-            diff = max(abs(q["final"][key] - c["final"][key]) for key in c["final"])
-            results["speedup"][n] = {"serial_ms": c["step_ms"], "parallel_ms": q["step_ms"],
-                                     "speedup": c["step_ms"] / q["step_ms"], "max_diff": diff}
-            print(f"n={n:4d} {args.nproc} ranks: {q['step_ms']:7.2f} ms/step, speed-up "
-                  f"{c['step_ms'] / q['step_ms']:.2f}, max difference {diff:.1e}", flush=True)
-    if not args.no_reference:
-        ref = _spawn(256, 0.0005, 1.0, "constant", 1)
-        results["reference"] = ref
-        print(f"reference n=256 k=0.0005: {ref['build_s'] + ref['run_s']:.1f} s, peak {ref['peak_mib_max']:.0f} MiB",
-              flush=True)
-        base = next(c for c in results["sizes"] if c["n"] == 256 and c["nproc"] == 1) if 256 in args.sizes else None
-        if base:
-            results["memory_flat"] += [base, ref]
-        for k in (0.01, 0.0005):
-            results["memory_flat"].append(_spawn(128, k, 1.0, "exponential", 1))
+    tmp = Path(tempfile.mkdtemp(prefix=".bench-", dir=out))  # the cases' results, on the disk results go to
+    try:
+        for n in args.sizes:
+            c = _spawn(n, 0.01, 1.0, "constant", 1, 1, tmp / f"size{n}")
+            results["sizes"].append(c)
+            print(f"n={n:4d} 1 rank : {c['step_ms']:7.2f} ms/step, floor {c['floor_ms']['total']:6.2f} ms, "
+                  f"ratio {c['ratio']:.2f}, output {c['split_ms']['output']:.2f} ms", flush=True)
+            if args.nproc > 1:
+                q = _spawn(n, 0.01, 1.0, "constant", args.nproc, 1, tmp / f"size{n}-np{args.nproc}")
+                results["sizes"].append(q)
+                diff = max(abs(q["final"][key] - c["final"][key]) for key in c["final"])
+                results["speedup"][n] = {"serial_ms": c["step_ms"], "parallel_ms": q["step_ms"],
+                                         "speedup": c["step_ms"] / q["step_ms"], "max_diff": diff}
+                print(f"n={n:4d} {args.nproc} ranks: {q['step_ms']:7.2f} ms/step, speed-up "
+                      f"{c['step_ms'] / q['step_ms']:.2f}, max difference {diff:.1e}", flush=True)
+            for d in tmp.iterdir():
+                shutil.rmtree(d)
+        if not args.no_discretizations:  # P1 at n = 128 and P2 at n = 64 have the same displacement dofs
+            for variant, n in (("constant", 128), ("p1-order2", 128), ("p2-order1", 64), ("p2-order2", 64)):
+                c = _spawn(n, 0.01, 1.0, variant, 1)
+                results.setdefault("discretizations", []).append(c)
+                print(f"{variant:10s} n={n:4d}: {c['step_ms']:7.2f} ms/step, floor {c['floor_ms']['total']:6.2f} ms, "
+                      f"ratio {c['ratio']:.2f}", flush=True)
+        if not args.no_output:
+            _output_cases(results, tmp, args.nproc)
+        if not args.no_reference:
+            ref = _spawn(256, 0.0005, 1.0, "constant", 1)
+            results["reference"] = ref
+            print(f"reference n=256 k=0.0005: {ref['build_s'] + ref['run_s']:.1f} s, peak {ref['peak_mib_max']:.0f} MiB",
+                  flush=True)
+            ref10 = _spawn(256, 0.0005, 1.0, "constant", 1, 10, tmp / "reference")
+            results["reference_every10"] = ref10
+            ratio = (ref10["build_s"] + ref10["run_s"]) / (ref["build_s"] + ref["run_s"])
+            results["reference_every10"]["ratio"] = ratio
+            print(f"reference, every 10th level written: {ref10['build_s'] + ref10['run_s']:.1f} s, ratio {ratio:.2f}",
+                  flush=True)
+            base = next(c for c in results["sizes"] if c["n"] == 256 and c["nproc"] == 1) if 256 in args.sizes else None
+            if base:
+                results["memory_flat"] += [base, ref]
+            for k in (0.01, 0.0005):
+                results["memory_flat"].append(_spawn(128, k, 1.0, "exponential", 1))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     (out / "bench.json").write_text(json.dumps(results, indent=1))
     (out / "bench.md").write_text(_table(results))
     print(f"wrote {out / 'bench.json'} and {out / 'bench.md'}")
@@ -183,7 +333,8 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "case":
         n, k, T, kernel = int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), sys.argv[5]
-        result = run_case(n, k, T, kernel)
+        every, outdir = (int(sys.argv[6]), sys.argv[7]) if len(sys.argv) > 7 else (None, None)
+        result = run_case(n, k, T, kernel, every, outdir)
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:

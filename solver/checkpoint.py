@@ -24,6 +24,7 @@ from mpi4py import MPI
 
 from .config import Config, OutputConfig, dumps
 from .errors import ConfigError
+from .io import on_rank0
 
 NAME = "checkpoint.h5"
 
@@ -60,6 +61,9 @@ def _fields(model) -> dict[str, _Field]:
         return assign
 
     out = {"u": _Field(cv, model.u.x.array.reshape(len(cv), -1), nv, setter(model.u.x.array))}
+    if model.u_prev is not None:  # time.order = 2: u_{n-1} for the extrapolation
+        up = model.u_prev.x.array
+        out["u_prev"] = _Field(cv, up.reshape(len(cv), -1), nv, setter(up))
     mech = model.mech.state()  # owned parts of PETSc vectors
     for k, v in mech.items():
         out[f"mech/{k}"] = _Field(cv[:nv], v.reshape(nv, -1), nv, lambda rows, k=k: model.mech.restore_vector(k, rows))
@@ -67,7 +71,11 @@ def _fields(model) -> dict[str, _Field]:
         Z = model.damage.V
         cz = Z.tabulate_dof_coordinates()
         z = model.damage.zeta.x.array
-        out["zeta"] = _Field(cz, z.reshape(len(cz), 1), Z.dofmap.index_map.size_local, setter(z))
+        nz = Z.dofmap.index_map.size_local
+        out["zeta"] = _Field(cz, z.reshape(len(cz), 1), nz, setter(z))
+        for k, v in model.damage.state().items():  # owned parts of PETSc vectors
+            out[f"damage/{k}"] = _Field(cz[:nz], v.reshape(nz, 1), nz,
+                                        lambda rows, k=k: model.damage.restore(k, rows))
     if model.history is not None:
         Q = model.history.M.function_space
         rule = model.history.rule
@@ -90,24 +98,34 @@ def write(directory: Path, model, step: int, t: float, part: int) -> None:
     comm = model.comm
     fields = _fields(model)
     gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
-    if comm.rank == 0:
+
+    def save() -> None:
         import h5py
 
         path = Path(directory) / NAME
         tmp = path.with_name(NAME + ".tmp")
-        with h5py.File(tmp, "w") as h5:
-            h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
-                             **{f"mech_{k}": v for k, v in model.mech.scalars().items()}})
-            for name, parts in gathered.items():
-                coords = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts])
-                order = np.argsort(_keys(coords))
-                h5.create_dataset(f"{name}/coords", data=coords[order])
-                h5.create_dataset(f"{name}/values", data=values[order])
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
+        try:
+            with h5py.File(tmp, "w") as h5:
+                h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
+                                 **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
+                                 **({f"damage_{k}": v for k, v in model.damage.scalars().items()}
+                                    if model.damage else {})})
+                for name, parts in gathered.items():
+                    coords = np.concatenate([p[0] for p in parts])
+                    values = np.concatenate([p[1] for p in parts])
+                    order = np.argsort(_keys(coords))
+                    h5.create_dataset(f"{name}/coords", data=coords[order])
+                    h5.create_dataset(f"{name}/values", data=values[order])
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+        except Exception as exc:  # a full disk: the previous checkpoint stays as it was
+            tmp.unlink(missing_ok=True)
+            if isinstance(exc, OSError):
+                raise
+            raise OSError(f"{NAME}: {exc}") from exc
         os.replace(tmp, path)
-    comm.barrier()
+
+    on_rank0(comm, save)
 
 
 @dataclass
@@ -143,6 +161,10 @@ def read(directory: Path, model) -> Checkpoint:
         for name, f in fields.items():
             f.assign(h5[f"{name}/values"][...][loaded[name]])
     model.mech.restore_scalars({k.removeprefix("mech_"): v for k, v in a.items() if k.startswith("mech_")})
+    if model.damage is not None:
+        model.damage.restore_scalars({k.removeprefix("damage_"): v for k, v in a.items() if k.startswith("damage_")})
+    if model.u_prev is not None:
+        model.u_prev.x.scatter_forward()
     model.u.x.scatter_forward()
     if model.damage is not None:
         model.damage.zeta.x.scatter_forward()

@@ -74,26 +74,32 @@ RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "che
 
 
 def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool) -> None:
+    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError."""
     import shutil
+    import tempfile
 
     problem = None
     if comm.rank == 0:
-        if outdir.exists() and not outdir.is_dir():
-            problem = f"--output {outdir}: exists and is not a directory"
-        elif restart:
-            if not (outdir / "checkpoint.h5").exists():
-                problem = f"--restart: {outdir / 'checkpoint.h5'} does not exist (nothing to restart from)"
-        elif outdir.is_dir():
-            existing = [f for f in RESULT_FILES if (outdir / f).exists()]
-            if existing and not overwrite:
-                problem = (f"--output {outdir}: holds earlier results ({', '.join(existing)}); "
-                           "pass --overwrite to replace them, --restart to continue them, or choose another directory")
-            elif existing:
-                for f in existing:
-                    target = outdir / f
-                    shutil.rmtree(target) if target.is_dir() else target.unlink()
-        if problem is None:
-            outdir.mkdir(parents=True, exist_ok=True)
+        try:
+            if outdir.exists() and not outdir.is_dir():
+                problem = f"--output {outdir}: exists and is not a directory"
+            elif restart:
+                if not (outdir / "checkpoint.h5").exists():
+                    problem = f"--restart: {outdir / 'checkpoint.h5'} does not exist (nothing to restart from)"
+            elif outdir.is_dir():
+                existing = [f for f in RESULT_FILES if (outdir / f).exists()]
+                if existing and not overwrite:
+                    problem = (f"--output {outdir}: holds earlier results ({', '.join(existing)}); "
+                               "pass --overwrite to replace them, --restart to continue them, or choose another directory")
+                elif existing:
+                    for f in existing:
+                        target = outdir / f
+                        shutil.rmtree(target) if target.is_dir() else target.unlink()
+            if problem is None:
+                outdir.mkdir(parents=True, exist_ok=True)
+                tempfile.TemporaryFile(dir=outdir).close()  # can we write in it? (mode bits do not tell root)
+        except OSError as exc:
+            problem = f"--output {outdir}: cannot write there ({exc.strerror or exc})"
     problem = comm.bcast(problem, root=0)
     if problem:
         raise UsageError(problem)
@@ -140,7 +146,9 @@ def cmd_check(args, comm: MPI.Comm) -> int:
         physics.append(f"memory({cfg.memory.kernel})")
     if cfg.damage.enabled:
         physics.append("damage")
-    log.info("%s: ok — %s, %d steps of k = %g", args.config, " + ".join(physics), cfg.time.steps, cfg.time.k)
+    disc = cfg.discretization
+    log.info("%s: ok — %s; u P%d, zeta P%d, %d steps of k = %g (order %d)", args.config, " + ".join(physics),
+             disc.u_degree, disc.zeta_degree, cfg.time.steps, cfg.time.k, cfg.time.order)
     return 0
 
 

@@ -50,6 +50,10 @@ class ContactPoints:
         s, wq = basix.make_quadrature(basix.CellType.interval, degree)
         s = s[:, 0]
         bs = V.dofmap.index_map_bs
+        degree_u = V.ufl_element().degree()
+        # P2 and above: the cell's basis at the points (basix orders vertex dofs first, as the cell's vertices)
+        element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree_u,
+                                       basix.LagrangeVariant.gll_warped) if degree_u > 1 else None
         rows, cols, vals, weights, gaps, coords, law = [], [], [], [], [], [], []
         npts = 0
         for part in parts:
@@ -69,14 +73,22 @@ class ContactPoints:
                 centre = x[dofs, :2].mean(axis=0)
                 if np.dot(centre - xa, n) > 0:  # outward
                     n = -n
-                for sq, w in zip(s, wq):
-                    for dof, phi in ((da, 1.0 - sq), (db, sq)):
+                if element is None:  # P1: the two hat functions of the facet
+                    basis = [((da, 1.0 - sq), (db, sq)) for sq in s]
+                else:
+                    x0 = x[dofs[0], :2]
+                    J = np.column_stack([x[dofs[1], :2] - x0, x[dofs[2], :2] - x0])
+                    ref = np.linalg.solve(J, (xa + s[:, None] * t - x0).T).T
+                    phi = element.tabulate(0, ref)[0, :, :, 0]
+                    basis = [tuple(zip(dofs, phi[q])) for q in range(len(s))]
+                for q, w in enumerate(wq):
+                    for dof, value in basis[q]:
                         for comp in range(2):
                             rows.append(npts)
                             cols.append(dof * bs + comp)
-                            vals.append(phi * n[comp])
+                            vals.append(value * n[comp])
                     weights.append(w * length)
-                    coords.append((1.0 - sq) * x[da] + sq * x[db])
+                    coords.append((1.0 - s[q]) * x[da] + s[q] * x[db])
                     npts += 1
             xq = np.array(coords[first:]).reshape(-1, 3)
             gaps.append(gap_values(part, xq))

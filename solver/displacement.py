@@ -10,6 +10,8 @@ so F_0 = F(u_{n-1}) + b_{n-1} - b_n exactly, without a matrix product or an asse
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
@@ -17,6 +19,17 @@ from petsc4py import PETSc
 
 from .contact import ContactTerm
 from .operators import Operators, assemble_without_diagonal
+
+
+@dataclass
+class SolveInfo:
+    """What a method reports for one level: iterations, linear solves, factorizations, final residual."""
+
+    iterations: int
+    factorizations: int
+    residual: float
+    reason: str
+    linear_solves: int = 0
 
 
 class DisplacementProblem:

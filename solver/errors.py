@@ -8,7 +8,8 @@ Callers decide by type and fields, never by the message text:
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
   (filled in by the stepper, :meth:`SolveFailure.at`), and a ``status`` word for studies:
   :class:`DisplacementSolveError` (``method``, ``reason``, ``iterations``, ``residuals``,
-  ``tolerance``), :class:`DamageSolveError` (``reason``), :class:`NonFiniteError` (``fields``).
+  ``tolerance``), :class:`DamageSolveError` (``reason``), :class:`NonFiniteError` (``fields``),
+  :class:`OutputError` (``reason``: writing results failed, e.g. a full disk).
 """
 
 from __future__ import annotations
@@ -122,6 +123,16 @@ class NonFiniteError(SolveFailure):
     def __init__(self, fields: list[str]) -> None:
         self.fields = sorted(set(fields))
         super().__init__(f"non-finite values in {', '.join(self.fields)}")
+
+
+class OutputError(SolveFailure):
+    """Writing the results failed (a full disk, a vanished directory); what was written before stays readable."""
+
+    status = "output_failed"
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+        super().__init__(f"writing results failed: {reason}")
 
 
 class RigidMotionError(SolveFailure):

@@ -23,11 +23,10 @@ from petsc4py import PETSc
 
 from .config import BoundaryConfig, SolverConfig
 from .contact_points import ContactPoints
-from .displacement import DisplacementProblem
+from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .geometry import Geometry
 from .linear import make_ksp
-from .newton import SolveInfo
 from .operators import assemble_without_diagonal
 
 

@@ -1,20 +1,16 @@
-"""Writers: XDMF time series (ParaView), CSV time series (rank 0), resolved config.
-
-XDMF cannot hold quadrature functions, so stresses are written as DG0 cell
-averages (exact L2 projection onto piecewise constants).
-"""
+"""Writers beside the XDMF series (solver/xdmf.py): CSV time series and resolved config (rank 0), von Mises."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import ufl
-from dolfinx import fem, io
-from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
-from petsc4py import PETSc
+
+from .errors import OutputError
+from .xdmf import describe_oserror
 
 CSV_COLUMNS = (
     "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
@@ -23,34 +19,6 @@ CSV_COLUMNS = (
     "wall_time",
 )
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
-
-
-class CellAverage:
-    """Cell averages of a UFL expression into a DG0 function: the L2 projection onto DG0."""
-
-    def __init__(self, expr, target: fem.Function, dx: ufl.Measure) -> None:
-        self.target = target
-        V = target.function_space
-        tau = ufl.TestFunction(V)
-        self.form = fem.form(ufl.inner(expr, tau) * dx)
-        self.vec = fpetsc.create_vector(self.form)
-        mesh = V.mesh
-        S = fem.FunctionSpace(mesh, ("DG", 0))
-        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S) * ufl.dx))
-        vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.bs = V.dofmap.index_map_bs
-        n = V.dofmap.index_map.size_local
-        self.inv_vol = 1.0 / vol.array_r[:n]
-        self.n = n
-
-    def update(self) -> None:
-        with self.vec.localForm() as v:
-            v.set(0.0)
-        fpetsc.assemble_vector(self.vec, self.form)
-        self.vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        vals = self.target.x.array[: self.n * self.bs].reshape(self.n, self.bs)
-        vals[:] = self.vec.array_r.reshape(self.n, self.bs) * self.inv_vol[:, None]
-        self.target.x.scatter_forward()
 
 
 def von_mises_array(s: np.ndarray, dim: int, s33: np.ndarray | None = None) -> np.ndarray:
@@ -67,124 +35,22 @@ def von_mises_array(s: np.ndarray, dim: int, s33: np.ndarray | None = None) -> n
     return np.sqrt(1.5 * np.einsum("nij,nij->n", dev, dev))
 
 
-def flush_hdf5() -> None:
-    """Flush every HDF5 file dolfinx has open (collective), so a killed run leaves readable data.
+def on_rank0(comm: MPI.Comm, action: Callable[[], None]) -> None:
+    """Run ``action`` on rank 0; an OSError there (a full disk) is raised as OutputError on every rank.
 
-    dolfinx 0.5.2 keeps its HDF5 file open between writes and offers no flush; its library
-    (libhdf5_openmpi, not h5py's) is reached through ctypes.
+    Files are written by rank 0 alone, so its failure must reach the other ranks, or they
+    would wait for it at their next collective call.
     """
-    import ctypes
-
-    try:
-        lib = ctypes.CDLL("libhdf5_openmpi.so.103")
-    except OSError:  # another build: nothing we can flush
-        return
-    lib.H5Fget_obj_count.restype = ctypes.c_ssize_t
-    lib.H5Fget_obj_count.argtypes = [ctypes.c_int64, ctypes.c_uint]
-    lib.H5Fget_obj_ids.restype = ctypes.c_ssize_t
-    lib.H5Fget_obj_ids.argtypes = [ctypes.c_int64, ctypes.c_uint, ctypes.c_size_t, ctypes.POINTER(ctypes.c_int64)]
-    lib.H5Fflush.argtypes = [ctypes.c_int64, ctypes.c_int]
-    H5F_OBJ_FILE, H5F_OBJ_ALL, H5F_SCOPE_GLOBAL = 0x0001, 0x001F, 1
-    n = lib.H5Fget_obj_count(H5F_OBJ_ALL, H5F_OBJ_FILE)
-    if n <= 0:
-        return
-    ids = (ctypes.c_int64 * n)()
-    lib.H5Fget_obj_ids(H5F_OBJ_ALL, H5F_OBJ_FILE, n, ids)
-    for fid in ids:
-        lib.H5Fflush(fid, H5F_SCOPE_GLOBAL)
-
-
-class XDMFWriter:
-    """``solution.xdmf``: one temporal collection over the data parts in ``fields/``.
-
-    dolfinx writes the data of this run's part to ``fields/part{k}.h5`` (in parallel), with
-    its own XML beside it, rewritten non-atomically and with one collection per function.
-    After each written level the HDF5 file is flushed and rank 0 rewrites ``solution.xdmf``
-    atomically, each time level one grid carrying every field: ParaView and meshio read it
-    as one dataset, and a crash leaves it readable. A restart writes a new part and keeps
-    the earlier levels (``prefix``) up to its checkpoint.
-    """
-
-    def __init__(self, directory: Path, mesh, functions: list[fem.Function], part: int = 0,
-                 prefix: list | None = None) -> None:
-        self.directory = Path(directory)
-        self.comm = mesh.comm
-        fields = self.directory / "fields"
-        if self.comm.rank == 0:
-            fields.mkdir(exist_ok=True)
-        self.comm.barrier()
-        self.part = fields / f"part{part}.xdmf"
-        self.file = io.XDMFFile(mesh.comm, str(self.part), "w")
-        self.file.write_mesh(mesh)
-        self.functions = functions
-        self.prefix = prefix or []
-
-    def write(self, t: float) -> None:
-        for f in self.functions:
-            self.file.write_function(f, t)
-        flush_hdf5()
-        self.comm.barrier()
-        if self.comm.rank == 0:
-            write_merged_xdmf(self.directory, self.prefix + part_grids(self.part))
-
-    def close(self) -> None:
-        self.file.close()
-
-
-def part_grids(part_xdmf: Path) -> list:
-    """Grids (one per written time, every field as an attribute) of a dolfinx XDMF file,
-    with data paths made relative to the results directory."""
-    import xml.etree.ElementTree as ET
-
-    domain = ET.parse(part_xdmf).getroot().find("Domain")
-    grids = domain.findall("Grid")
-    mesh_grid = next(g for g in grids if g.get("GridType") == "Uniform")
-    by_time: dict[str, list] = {}
-    for coll in (g for g in grids if g.get("GridType") == "Collection"):
-        for g in coll.findall("Grid"):
-            by_time.setdefault(g.find("Time").get("Value"), []).extend(g.findall("Attribute"))
-    out = []
-    for t in sorted(by_time, key=float):
-        g = ET.Element("Grid", Name="solution", GridType="Uniform")
-        g.append(mesh_grid.find("Topology"))
-        g.append(mesh_grid.find("Geometry"))
-        ET.SubElement(g, "Time", Value=t)
-        g.extend(by_time[t])
-        for item in g.iter("DataItem"):
-            if not item.text.startswith("fields/"):
-                item.text = f"fields/{item.text.strip()}"
-        out.append(g)
-    return out
-
-
-def write_merged_xdmf(directory: Path, grids: list) -> None:
-    """Write ``solution.xdmf`` (one temporal collection) atomically."""
-    import copy
-    import xml.etree.ElementTree as ET
-
-    root = ET.Element("Xdmf", Version="3.0")
-    coll = ET.SubElement(ET.SubElement(root, "Domain"), "Grid", Name="solution", GridType="Collection",
-                         CollectionType="Temporal")
-    coll.extend(copy.deepcopy(grids))
-    tree = ET.ElementTree(root)
-    ET.indent(tree, space="  ")
-    path = Path(directory) / "solution.xdmf"
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(b'<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n')
-        tree.write(fh, encoding="utf-8", xml_declaration=False)
-    os.replace(tmp, path)
-
-
-def merged_grids(directory: Path, until: float | None = None) -> list:
-    """The grids of an existing ``solution.xdmf`` (times <= until)."""
-    import xml.etree.ElementTree as ET
-
-    coll = ET.parse(Path(directory) / "solution.xdmf").getroot().find("Domain").find("Grid")
-    grids = coll.findall("Grid")
-    if until is None:
-        return grids
-    return [g for g in grids if float(g.find("Time").get("Value")) <= until * (1 + 1e-12) + 1e-300]
+    error = None
+    if comm.rank == 0:
+        try:
+            action()
+        except OSError as exc:
+            error = describe_oserror(exc)
+    if comm.size > 1:
+        error = comm.bcast(error, root=0)
+    if error is not None:
+        raise OutputError(error)
 
 
 class CSVWriter:
@@ -193,8 +59,9 @@ class CSVWriter:
     ``columns``: CSV_COLUMNS and the scene's own (the reactions of its Dirichlet parts).
 
     The file is opened in append mode and every row goes out in a single system call, so
-    a killed run leaves only complete rows. ``keep`` lines (a restart's rows up to its
-    checkpoint, as written) are rewritten first, atomically.
+    a killed run leaves only complete rows; a row that does not fit on the disk is cut off
+    again (OSError). ``keep`` lines (a restart's rows up to its checkpoint, as written) are
+    rewritten first, atomically.
     """
 
     def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None,
@@ -202,14 +69,26 @@ class CSVWriter:
         self.comm = comm
         self.fd = None
         self.columns = columns
-        if comm.rank == 0:
-            text = ",".join(columns) + "\n" + "".join(keep or [])
-            write_text_atomic(path, text)
+
+        def start() -> None:
+            write_text_atomic(path, ",".join(columns) + "\n" + "".join(keep or []))
             self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+            self.size = os.fstat(self.fd).st_size
+
+        on_rank0(comm, start)
 
     def write(self, row: dict) -> None:
-        if self.fd is not None:
-            os.write(self.fd, _line(row, self.columns).encode())
+        """Append one row (rank 0; the others do nothing)."""
+        if self.fd is None:
+            return
+        data = _line(row, self.columns).encode()
+        try:
+            if os.write(self.fd, data) != len(data):
+                raise OSError(28, "No space left on device (short write)", None)
+        except OSError:
+            os.ftruncate(self.fd, self.size)  # no partial row
+            raise
+        self.size += len(data)
 
     def close(self) -> None:
         if self.fd is not None:

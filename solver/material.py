@@ -1,4 +1,5 @@
-"""Constitutive functions as pure UFL: elasticity A, its out-of-plane stress in plane strain, truncation Phi_L, von Mises."""
+"""Constitutive functions as pure UFL (docs/model.md §2): elasticity A, its out-of-plane stress in plane strain,
+truncation Phi_L, von Mises."""
 
 from __future__ import annotations
 

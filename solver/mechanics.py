@@ -23,12 +23,12 @@ from .config import BodyForceConfig, BoundaryConfig, MaterialConfig, SolverConfi
 from .contact import ContactTerm
 from .contact_points import ContactPoints
 from .diagnostics import DisplacementDiagnostics, Reactions
-from .displacement import DisplacementProblem
+from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .fixed_point import FixedPointSolver, PenaltyDualitySolver
 from .geometry import Geometry
 from .memory import History
-from .newton import NewtonSolver, SolveInfo
+from .newton import NewtonSolver
 from .operators import Dirichlet, Operators, check_rigid_motions
 
 __all__ = ["Mechanics", "SolveInfo", "DisplacementSolveError"]

@@ -11,7 +11,10 @@ stored. Only a tabulated (general) kernel keeps every H_m.
 
 The history is committed once per step, after the step has converged. The trapezoidal
 rule (``memory.rule = "trapezoid"``) adds the current level's (k/2) g(0) H_n, implicit in
-u_n: :func:`trapezoid_term` gives that term of the displacement residual.
+u_n: :func:`trapezoid_term` gives that term of the displacement residual. With
+``trapezoid_extrapolated`` (the default of ``time.order = 2``) H_n is evaluated at
+u* = 2 u_{n-1} - u_{n-2} instead (:meth:`PronyHistory.set_current`): an O(k^3) change per
+level that keeps the Jacobian, and its factorization, independent of zeta_n.
 """
 
 from __future__ import annotations
@@ -101,12 +104,14 @@ class MemorySource:
     expression ``memory_source`` (tested), which remains the definition.
     """
 
-    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lam: float, mu: float, L: float) -> None:
+    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
+                 L: float) -> None:
         import scipy.sparse as sp
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
-        self.u, self.zeta, self.lam, self.mu, self.L, self.d = u, zeta, lam, mu, L, d
+        self.u, self.zeta, self.L, self.d = u, zeta, L, d
+        self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
         cells = rule.cells
         npts = rule.points.shape[0]
         rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
@@ -155,8 +160,8 @@ class MemorySource:
         e = flat.reshape(-1, self.d * self.d)
         diag = list(range(0, self.d * self.d, self.d + 1))
         tr = e[:, diag].sum(axis=1)
-        tr *= self.lam
-        e *= 2.0 * self.mu
+        tr *= self.lame_lambda
+        e *= 2.0 * self.lame_mu
         for i in diag:
             e[:, i] += tr
         np.clip(flat, -self.L, self.L, out=flat)
@@ -186,7 +191,7 @@ class OutOfPlaneSource:
         src, d = self.source, self.source.d
         e = (src.G @ src.u.x.array).reshape(-1, d * d)
         h = e[:, list(range(0, d * d, d + 1))].sum(axis=1)
-        h *= src.lam
+        h *= src.lame_lambda
         np.clip(h, -src.L, src.L, out=h)
         if src.Zq is not None:
             h *= src.Zq @ src.zeta.x.array
@@ -202,6 +207,7 @@ class History:
     """Base: the memory tensor M (a quadrature function) and its update after a step."""
 
     M: fem.Function
+    extrapolated = False  # True: the current level's term is set by set_current() before the displacement solve
 
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
@@ -219,12 +225,18 @@ class History:
 class PronyHistory(History):
     """Prony series (constant kernel: one term with tau = inf), updated recursively."""
 
-    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False) -> None:
+    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False,
+                 extrapolated: bool = False) -> None:
         self.rule = rule
         self.M = fem.Function(source.Q, name="memory")
         self.H = source
-        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2
-        self.trapezoid = trapezoid
+        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2;
+        # implicit in u_n (trapezoid) or with H_n evaluated at an extrapolated u (extrapolated: P kept apart)
+        self.trapezoid = trapezoid or extrapolated
+        self.extrapolated = extrapolated
+        self.P = np.zeros_like(self.M.x.array) if extrapolated else None
+        # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
+        self.current_weight: fem.Constant | None = None
         self.g0 = float(np.sum(weights))
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
@@ -237,23 +249,33 @@ class PronyHistory(History):
         h = self.H()
         if self.trapezoid and n == 0:
             h *= 0.5
+        if self.current_weight is not None:
+            self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
-            m = self.M.x.array
+            m = self.P if self.extrapolated else self.M.x.array
             m += (self.k * self.weights[0]) * h
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
             return
-        total = self.M.x.array
+        total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
         for term, c, e in zip(self.terms, self.weights, self.decay):
             term += (self.k * c) * h
             term *= e
             total += term
 
+    def set_current(self, h: np.ndarray) -> None:
+        """M_n = P_n + (k/2) g(0) h, with h = H at the extrapolated level n (``extrapolated`` only)."""
+        np.multiply(h, 0.5 * self.k * self.g0, out=self.M.x.array)
+        self.M.x.array[:] += self.P
+
     def state(self) -> dict[str, np.ndarray]:
-        if self.terms is None:
-            return {"M": self.M.x.array}
-        return {"M": self.M.x.array, **{f"M{i}": t for i, t in enumerate(self.terms)}}
+        out = {"M": self.M.x.array}
+        if self.P is not None:
+            out["P"] = self.P
+        if self.terms is not None:
+            out.update({f"M{i}": t for i, t in enumerate(self.terms)})
+        return out
 
 
 class TabulatedHistory(History):
@@ -299,6 +321,11 @@ class PlaneStrainHistory(History):
         self.main.commit(n)
         self.out_of_plane.commit(n)
 
+    def set_current(self, h: np.ndarray) -> None:
+        """The extrapolated trapezoid's current term for both (H_33 evaluated at the same, extrapolated, u)."""
+        self.main.set_current(h)
+        self.out_of_plane.set_current(self.out_of_plane.H())
+
     def state(self) -> dict[str, np.ndarray]:
         return {**self.main.state(), **{f"zz_{k}": v for k, v in self.out_of_plane.state().items()}}
 
@@ -319,7 +346,8 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):
-        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid")
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid",
+                            extrapolated=cfg.rule == "trapezoid_extrapolated")
     return TabulatedHistory(rule, source, cfg.table, k, steps)
 
 
@@ -328,10 +356,12 @@ def trapezoid_term(history: PronyHistory, zeta, A, L: float):
     from .material import strain
 
     rule = history.rule
+    # a constant, not a number: not compiled into the form, and 0 at level 0, where M_0 = 0 (the history's commit
+    # sets it to (k/2) g(0) from level 1 on)
+    history.current_weight = fem.Constant(rule.mesh, PETSc.ScalarType(0.0))
 
     def term(u, w):
         H = memory_source(u, zeta, A, L)
-        half_k_g0 = fem.Constant(rule.mesh, PETSc.ScalarType(0.5 * history.k * history.g0))  # not compiled into the form
-        return half_k_g0 * ufl.inner(H, strain(w)) * rule.dx
+        return history.current_weight * ufl.inner(H, strain(w)) * rule.dx
 
     return term

@@ -9,27 +9,14 @@ is linear and SNES runs as a single KSP solve.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from .config import SolverConfig
-from .displacement import DisplacementProblem
+from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .linear import REASONS_SNES, check_options, clear_options, direct_options, set_options
-
-
-@dataclass
-class SolveInfo:
-    """Iterations, linear solves, factorizations and final residual of one solve."""
-
-    iterations: int
-    factorizations: int
-    residual: float
-    reason: str
-    linear_solves: int = 0
 
 
 class NewtonSolver:

@@ -32,6 +32,24 @@ def available() -> bool:
     return executable() is not None
 
 
+def python_problem(exe: str | None = None) -> str | None:
+    """None if ParaView's ``pvbatch`` can import its Python modules, else the one-line reason (runs ``--check``).
+
+    Debian's ``paraview`` package ships ``pvbatch`` but not the modules (``python3-paraview``).
+    """
+    exe = exe or executable()
+    if exe is None:
+        return NOT_INSTALLED
+    try:
+        res = subprocess.run(command(["--check"], exe), env=environment(), capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"error: {exe} --check failed ({exc})"
+    if res.returncode == 0:
+        return None
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    return lines[-1] if lines else f"error: {exe} failed (exit {res.returncode}): {res.stderr.strip()[-300:]}"
+
+
 def has_display() -> bool:
     """True if an X (or Wayland) display is set."""
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -96,7 +114,8 @@ def main(argv: list[str] | None = None) -> int:
         return code
     # Debian's pvbatch under Xvfb has been seen to abort while creating its window (twice in
     # about 40 renders, not reproducible): a crash is retried once on a fresh virtual display;
-    # the script's own refusals (exit 2: bad directory, field or option) are not
+    # the script's own refusals (exit 2: bad directory, field or option, ParaView's Python
+    # modules missing) are not
     code = 1
     for attempt in range(2):
         try:

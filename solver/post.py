@@ -26,59 +26,17 @@ def point_value(f, point) -> np.ndarray:
 
 
 def read_results(directory: str | Path) -> dict:
-    """Read a results directory through ``solution.xdmf``: node coordinates, cell connectivity,
-    the written times, and {field: {t: values}} (P1 fields per node, DG0 fields per cell),
-    all in the node and cell order of the first data part."""
-    import xml.etree.ElementTree as ET
+    """Read a results directory through ``solution.xdmf``: node coordinates (``geometry``), cells
+    (``topology``), the written ``times``, and ``fields`` {field: {t: values}} (P1 fields per node,
+    DG0 fields per cell; tensors as XX, YY, ZZ, XY, YZ, XZ). Rows are in the mesh's input order,
+    the same whatever the number of ranks that wrote them (solver/xdmf.py)."""
+    from .xdmf import read_series
 
-    import h5py
-
-    directory = Path(directory)
-    grids = ET.parse(directory / "solution.xdmf").getroot().find("Domain").find("Grid").findall("Grid")
-    files: dict[str, h5py.File] = {}
-
-    def load(item) -> np.ndarray:
-        name, dataset = item.text.strip().split(":", 1)
-        if name not in files:
-            files[name] = h5py.File(directory / name, "r")
-        return files[name][dataset][...]
-
-    out: dict = {"fields": {}, "times": []}
-    perms: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # geometry dataset -> (node, cell) maps to the first
-    try:
-        for g in grids:
-            t = float(g.find("Time").get("Value"))
-            out["times"].append(t)
-            gkey = g.find("Geometry").find("DataItem").text.strip()
-            if gkey not in perms:
-                x = load(g.find("Geometry").find("DataItem"))
-                cells = load(g.find("Topology").find("DataItem"))
-                if "geometry" not in out:
-                    out["geometry"], out["topology"] = x, cells
-                perms[gkey] = (_match(out["geometry"], x),
-                               _match(out["geometry"][out["topology"]].mean(axis=1), x[cells].mean(axis=1)))
-            node, cell = perms[gkey]
-            for att in g.findall("Attribute"):
-                values = load(att.find("DataItem"))
-                values = values[node] if att.get("Center") == "Node" else values[cell]
-                out["fields"].setdefault(att.get("Name"), {})[t] = values
-    finally:
-        for f in files.values():
-            f.close()
+    res = read_series(Path(directory) / "solution.xdmf")
+    out = {"geometry": res["points"], "topology": res["cells"], "times": res["times"], "fields": {}}
+    for name, values in res["fields"].items():
+        out["fields"][name] = {t: v for t, v in zip(res["times"], values) if v is not None}
     return out
-
-
-def _match(reference: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Index into ``points`` of each reference point (parts written by other partitions order them differently)."""
-    def order(p):
-        return np.lexsort(np.round(p, 10).T[::-1])
-
-    ro, po = order(reference), order(points)
-    index = np.empty(len(reference), dtype=np.int64)
-    index[ro] = po
-    if not np.allclose(points[index], reference, rtol=0, atol=1e-9):
-        raise ValueError("a data part has a different mesh")
-    return index
 
 
 def read_csv(path: str | Path) -> list[dict[str, float]]:

@@ -30,7 +30,7 @@ from .damage import Damage
 from .diagnostics import DamageDiagnostics
 from .errors import NonFiniteError, SolveFailure
 from .geometry import Geometry, build
-from .io import CSV_COLUMNS, CSVWriter, merged_grids, write_text_atomic
+from .io import CSV_COLUMNS, CSVWriter, on_rank0, write_text_atomic
 from .material import elasticity, lame
 from .mechanics import Mechanics
 from .memory import (
@@ -57,6 +57,7 @@ class Model:
     history: History | None
     rule: QuadratureRule
     mech: Mechanics
+    u_prev: fem.Function | None = None  # u_{n-1} while level n is solved (time.order = 2: the extrapolation)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -67,14 +68,16 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     """Mesh, spaces and the physics terms the scene switches on."""
     geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
     mesh = geo.mesh
-    V = fem.VectorFunctionSpace(mesh, ("CG", 1))
+    disc = cfg.discretization
+    V = fem.VectorFunctionSpace(mesh, ("CG", disc.u_degree))
     u = fem.Function(V, name="displacement")
     k, steps = cfg.time.k, cfg.time.steps
     damage = None
     if cfg.damage.enabled:
-        Z = fem.FunctionSpace(mesh, ("CG", 1))
+        Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
+        scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
         damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        cfg.solver.linear, cfg.solver.damage_scheme)
+                        cfg.solver.linear, scheme)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
@@ -82,8 +85,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     mat = cfg.material
     history = None
     if cfg.memory.kernel != "none":
-        lam, mu = lame(mat.E, mat.nu, mat.model)
-        source = MemorySource(rule, u, zeta, lam, mu, cfg.memory.L)
+        lame_lambda, lame_mu = lame(mat.E, mat.nu, mat.model)
+        source = MemorySource(rule, u, zeta, lame_lambda, lame_mu, cfg.memory.L)
         history = make_history(cfg.memory, rule, source, k, steps)
     implicit = None
     if history is not None and cfg.memory.rule == "trapezoid":
@@ -92,7 +95,8 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
         history = PlaneStrainHistory(history, make_history(cfg.memory, rule, OutOfPlaneSource(rule, source), k, steps))
     mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit,
                      body_force=cfg.body_force)
-    return Model(cfg, geo, u, zeta, damage, history, rule, mech)
+    u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev)
 
 
 class Stepper:
@@ -102,6 +106,9 @@ class Stepper:
         self.model = model
         self.k = model.cfg.time.k
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
+        # the second-order scheme starts with one predictor-corrector step (Heun): AB2 and the extrapolation
+        # need two past levels
+        self.heun_start = model.cfg.time.order == 2 and (model.damage is not None or model.u_prev is not None)
 
     def step(self, n: int) -> dict:
         """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""
@@ -115,8 +122,21 @@ class Stepper:
             if n > 0 and model.damage is not None:
                 dinfo = model.damage.step()
                 clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+            if n > 0 and model.u_prev is not None:
+                self._extrapolated_memory(n)
             t2 = time.perf_counter()
             info = model.mech.solve(t)
+            if n == 1 and self.heun_start:  # correct zeta_1 and M_1 with the predicted u_1, then solve again
+                if model.damage is not None:
+                    dinfo = model.damage.correct_first_step()
+                    clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+                if model.u_prev is not None:
+                    model.history.set_current(model.history.H())
+                again = model.mech.solve(t)
+                again.iterations += info.iterations
+                again.linear_solves += info.linear_solves
+                again.factorizations += info.factorizations
+                info = again
             self._check_finite()
         except SolveFailure as exc:
             raise exc.at(n, t) from None
@@ -134,6 +154,18 @@ class Stepper:
         row.update({"time_memory": t1 - t0, "time_damage": t2 - t1, "time_displacement": t3 - t2,
                     "time_diagnostics": t4 - t3})
         return row
+
+    def _extrapolated_memory(self, n: int) -> None:
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); u keeps u_{n-1}."""
+        model = self.model
+        u, u_prev = model.u.x.array, model.u_prev.x.array
+        last = u.copy()
+        if n >= 2:
+            u *= 2.0
+            u -= u_prev
+        model.history.set_current(model.history.H())
+        u[:] = last
+        u_prev[:] = last
 
     def _check_finite(self) -> None:
         model = self.model
@@ -162,20 +194,21 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
     after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
-    it, and the new levels go to a new data part.
+    it, and the new levels are appended. A write that fails (a full disk) stops the run with
+    an OutputError that knows the step; what was written before stays readable.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
-    start, part, keep, prefix = 0, 0, None, None
+    start, part, keep, keep_until = 0, 0, None, None
     if restart:
         ckpt = checkpoint.read(outdir, model)
-        start, part = ckpt.step + 1, ckpt.part
+        start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
         if comm.rank == 0:
             keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
-            prefix = merged_grids(outdir, until=ckpt.t) if (outdir / "solution.xdmf").exists() else []
-    if outdir is not None and comm.rank == 0:
-        write_text_atomic(outdir / "config.toml", dumps(cfg))
-    out = Outputs(model, cfg.material, outdir if cfg.output.xdmf else None, part=part, prefix=prefix)
+    if outdir is not None:
+        on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
+    levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
+    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
     columns = CSV_COLUMNS + model.mech.diagnostics.columns
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
@@ -184,17 +217,20 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     try:
         for n in range(start, steps + 1):
             row = stepper.step(n)
-            t0 = time.perf_counter()
-            if writes_level(n, steps, cfg.output.every):
-                out.write(row["t"])
-            row["time_output"] = time.perf_counter() - t0
-            row["wall_time"] = sum(row[c] for c in ("time_memory", "time_damage", "time_displacement",
-                                                    "time_diagnostics", "time_output"))
-            rows.append(row)
-            if csv is not None:
-                csv.write(row)
-            if every_ckpt and n < steps and n % every_ckpt == 0:
-                checkpoint.write(outdir, model, n, row["t"], part)
+            try:
+                t0 = time.perf_counter()
+                if writes_level(n, steps, cfg.output.every):
+                    out.write(row["t"])
+                row["time_output"] = time.perf_counter() - t0
+                row["wall_time"] = sum(row[c] for c in ("time_memory", "time_damage", "time_displacement",
+                                                        "time_diagnostics", "time_output"))
+                rows.append(row)
+                if csv is not None:
+                    on_rank0(comm, lambda row=row: csv.write(row))
+                if every_ckpt and n < steps and n % every_ckpt == 0:
+                    checkpoint.write(outdir, model, n, row["t"], part)
+            except SolveFailure as exc:
+                raise exc.at(n, row["t"]) from None
             if on_step is not None:
                 on_step(row)
     finally:

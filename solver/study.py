@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -197,14 +198,25 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
     return front
 
 
-def work_precision(args) -> int:
-    import matplotlib
+def _read_rows(path: Path) -> list[dict]:
+    """Rows of a CSV this command wrote, numbers as numbers."""
+    def value(v: str):
+        if v in ("True", "False"):
+            return v == "True"
+        try:
+            return float(v)
+        except ValueError:
+            return v
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    with open(path, newline="") as fh:
+        return [{k: value(v) for k, v in r.items()} for r in csv.DictReader(fh)]
 
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
+
+DISC_COLUMNS = ["series", "n", "k", "u_degree", "zeta_degree", "order", "dofs_u", "status", "error", "error_u",
+                "error_zeta", "t_max", "error_T", "levels_compared", "loop_seconds", "pareto_series", "pareto_all"]
+
+
+def _methods_part(args, out: Path) -> list[dict]:
     from .convergence import Reference
 
     Reference(SCENES["example1"], args.ref_n, args.ref_k, args.ks, Path(args.cache), ["boundary.bottom.mu=1e-10"])
@@ -220,9 +232,55 @@ def work_precision(args) -> int:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
+    return rows
+
+
+def _discretizations_part(args, out: Path) -> tuple[list[dict], dict]:
+    from .discretizations import SERIES, measure_series, references
+
+    fine, est = references(SCENES["example1"], args.disc_ref_n, args.disc_ref_k, Path(args.cache))
+    rows = measure_series(fine, args.disc_ns, args.disc_ks, extra=[("P1, order 1 (paper)", 128, 0.001)])
+    ok = [r for r in rows if r["status"] == "converged"]
+    for label in SERIES:
+        sub = [r for r in ok if r["series"] == label]
+        front = set(pareto([(r["loop_seconds"], r["error"]) for r in sub]))
+        for i, r in enumerate(sub):
+            r["pareto_series"] = i in front
+    front = set(pareto([(r["loop_seconds"], r["error"]) for r in ok]))
+    for i, r in enumerate(ok):
+        r["pareto_all"] = i in front
+    with open(out / "work_precision_discretizations.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=DISC_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    info = {"n": fine.n, "k": fine.k, "second": est, "seconds": fine.seconds}
+    (out / "work_precision_reference.json").write_text(json.dumps(info, indent=1))
+    return rows, info
+
+
+def work_precision(args) -> int:
+    """Methods (against the P1 reference) and discretizations (against the P2 / order 2 reference), one chart."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    if "methods" in args.parts:
+        rows = _methods_part(args, out)
+    else:  # the chart keeps the last measured methods
+        rows = _read_rows(out / "work_precision.csv") if (out / "work_precision.csv").exists() else []
+    if "discretizations" in args.parts:
+        disc, info = _discretizations_part(args, out)
+    else:
+        disc = _read_rows(out / "work_precision_discretizations.csv")
+        info = json.loads((out / "work_precision_reference.json").read_text())
+    ok = [r for r in rows if r["status"] == "converged"]
     failed = sorted({r["method"] for r in rows if r["status"] != "converged"})
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.2))
-    titles = {"error": "Table 1 norm: max over levels (reached at t = 0: spatial)", "error_T": "the same norm at t = T"}
+    fig, axes = plt.subplots(1, 3, figsize=(19, 5.4))
+    titles = {"error": "methods: Table 1 norm, max over levels (reached at t = 0: spatial)",
+              "error_T": "methods: the same norm at t = T"}
     for ax, key in zip(axes, ("error", "error_T")):
         for label, marker in zip(dict.fromkeys(r["method"] for r in ok), "osD^vP"):
             sub = [r for r in ok if r["method"] == label]
@@ -230,20 +288,61 @@ def work_precision(args) -> int:
         pf = sorted((r for r in ok if r[f"pareto_{key}"]), key=lambda r: r["seconds"])
         ax.loglog([r["seconds"] for r in pf], [r[key] for r in pf], "-", color="k", lw=1, label="Pareto front")
         for r in pf:
-            ax.annotate(f"{r['method'].split('+')[-1][:9]} n={r['n']},k={r['k']:g}", (r["seconds"], r[key]),
+            ax.annotate(f"{r['method'].split('+')[-1][:9]} n={r['n']:g},k={r['k']:g}", (r["seconds"], r[key]),
                         fontsize=6, xytext=(3, 3), textcoords="offset points")
         ax.set_xlabel("wall time of the run (s)")
         ax.set_ylabel(r"$\|\varepsilon(u-u^{ref})\| + \|\zeta-\zeta^{ref}\|$")
-        ax.set_title(titles[key], fontsize=9)
+        ax.set_title(titles[key] + f" (P1 reference n = {args.ref_n})", fontsize=8)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"Example 1 (mu = 1e-10), n = {', '.join(map(str, args.ns))}, k = {max(args.ks):g} ... {min(args.ks):g} "
-                 f"against the reference (n = {args.ref_n}, k = {args.ref_k:g})"
-                 + (f"; failed, not drawn: {', '.join(failed)}" if failed else ""), fontsize=9)
+    _draw_discretizations(axes[2], disc, info)
+    fig.suptitle(f"Example 1 (mu = 1e-10). Methods: n = {', '.join(map(str, args.ns))}, k = {max(args.ks):g} ... "
+                 f"{min(args.ks):g}" + (f"; failed, not drawn: {', '.join(failed)}" if failed else ""), fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "work_precision.png", dpi=120)
     plt.close(fig)
-    print(f"wrote {out / 'work_precision.csv'} and {out / 'work_precision.png'}")
+    print(f"wrote {out / 'work_precision.png'} and its CSV files")
+    return 0
+
+
+def _draw_discretizations(ax, disc: list[dict], info: dict) -> None:
+    ok = [r for r in disc if r["status"] == "converged"]
+    grid = [r for r in ok if not (r["n"] == 128 and r["k"] == 0.001)]
+    labels = list(dict.fromkeys(r["series"] for r in grid))
+    for label, marker, color in zip(labels, "os^D", ("C0", "C1", "C2", "C3")):
+        sub = sorted((r for r in grid if r["series"] == label), key=lambda r: r["loop_seconds"])
+        ax.loglog([r["loop_seconds"] for r in sub], [r["error"] for r in sub], marker, color=color, alpha=0.6,
+                  label=label)
+        pf = [r for r in sub if r["pareto_series"]]
+        ax.loglog([r["loop_seconds"] for r in pf], [r["error"] for r in pf], "-", color=color, lw=1)
+    for r in (r for r in ok if r["n"] == 128 and r["k"] == 0.001):
+        ax.loglog([r["loop_seconds"]], [r["error"]], "kx", ms=9, label="paper's scheme, n = 128, k = 0.001")
+    ax.axhline(8.289e-4, color="gray", ls="--", lw=0.8, label="8.3e-4 (the paper's best Table 1 entry)")
+    ax.axvline(1.0, color="gray", ls=":", lw=0.8)
+    best = [r for r in ok if r["error"] <= 8.289e-4 and r["loop_seconds"] <= 1.0]
+    if best:
+        r = min(best, key=lambda r: r["loop_seconds"])
+        ax.annotate(f"{r['series']} n={r['n']:g}, k={r['k']:g}: {r['error']:.2e} in {r['loop_seconds']:.2f} s",
+                    (r["loop_seconds"], r["error"]), fontsize=7, xytext=(5, -12), textcoords="offset points")
+    ax.set_xlabel("time-loop wall time (s)")
+    ax.set_title(f"discretizations against the P2 / order 2 reference (n = {info['n']:g}, k = {info['k']:g}; "
+                 f"its own error ~ {info['second']['estimate']:.1e})", fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+
+
+def orders(args) -> int:
+    """The order table: observed orders in h (P1, P2) and in k (orders 1 and 2), to orders.md and orders.json."""
+    from .discretizations import order_table, orders_markdown, references
+
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    fine, est = references(SCENES["example1"], args.disc_ref_n, args.disc_ref_k, Path(args.cache))
+    table = order_table(fine, SCENES["example1"], args.disc_ns, args.disc_ks, args.n_time)
+    table["reference"] = {"n": fine.n, "k": fine.k, "second": est}
+    (out / "orders.json").write_text(json.dumps(table, indent=1))
+    (out / "orders.md").write_text(orders_markdown(table, args.n_time))
+    print((out / "orders.md").read_text())
     return 0
 
 
@@ -276,14 +375,22 @@ def _run_groups(fn, groups: list[tuple], jobs: int) -> list[dict]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver study", description="stability map and work-precision chart")
     sub = p.add_subparsers(dest="which", required=True)
-    for name, ref_n in (("stability", 32), ("work-precision", 128)):
+    for name, ref_n in (("stability", 32), ("work-precision", 128), ("orders", 128)):
         s = sub.add_parser(name)
         s.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
         s.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache"))
         s.add_argument("--ref-n", type=int, default=ref_n)
         s.add_argument("--ref-k", type=float, default=0.0005)
         s.add_argument("--jobs", type=int, default=2)
-    st, wp = sub.choices["stability"], sub.choices["work-precision"]
+    st, wp, od = sub.choices["stability"], sub.choices["work-precision"], sub.choices["orders"]
+    for parser in (wp, od):  # the discretization series and their P2 / order 2 reference
+        parser.add_argument("--disc-ref-n", type=int, default=256)
+        parser.add_argument("--disc-ref-k", type=float, default=0.0025)
+        parser.add_argument("--disc-ns", type=int, nargs="+", default=[8, 16, 32, 64])
+        parser.add_argument("--disc-ks", type=float, nargs="+", default=[0.1, 0.05, 0.025, 0.0125])
+    wp.add_argument("--parts", nargs="+", default=["methods", "discretizations"], choices=["methods", "discretizations"],
+                    help="what to measure (the chart redraws the other part from its CSV)")
+    od.add_argument("--n-time", type=int, default=16, help="the mesh of the orders in k")
     st.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     st.add_argument("--mus", type=float, nargs="+", default=MUS)
     st.add_argument("--ks", type=float, nargs="+", default=KS)
@@ -295,4 +402,4 @@ def main(argv: list[str] | None = None) -> int:
     wp.add_argument("--ns", type=int, nargs="+", default=[8, 16, 32, 64])
     wp.add_argument("--methods", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     args = p.parse_args(argv)
-    return stability(args) if args.which == "stability" else work_precision(args)
+    return {"stability": stability, "work-precision": work_precision, "orders": orders}[args.which](args)

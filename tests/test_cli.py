@@ -1,5 +1,9 @@
 """The command line as a user meets it: exit codes, one-line errors, no silent overwrite, MPI."""
 
+import os
+import subprocess
+
+import numpy as np
 import pytest
 from conftest import run_cli as cli
 
@@ -31,6 +35,7 @@ def test_incompatible_interval_refused_before_output(tmp_path):
     assert res.returncode == 2 and "boundary.bottom.interval" in res.stderr and not out.exists()
 
 
+@pytest.mark.slow
 def test_check_and_no_overwrite(tmp_path):
     res = cli(["check", "configs/example1.toml"])
     assert res.returncode == 0 and "ok" in res.stderr
@@ -86,3 +91,77 @@ def test_petsc_option_petsc_rejects_is_one_line_exit_2(tmp_path, nproc, option, 
     assert reason in ours[0] and not out.exists()
     if nproc == 1:
         assert res.stderr.strip() == ours[0]
+
+
+FULL_DISK = ["run", "configs/example1.toml", "--no-progress", "--set", "mesh.nx=16", "--set", "mesh.ny=16",
+             "--set", "time.T=0.1", "--set", "time.k=0.001", "--set", "output.checkpoint_every=10",
+             "--set", 'output.fields=["displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic"]']
+
+
+def _stopped_by_full_disk(res, out, step: int | None = None) -> None:
+    """Exit 1 with one line naming the step and the reason; everything listed before is complete and readable."""
+    assert res.returncode == 1, res.stderr[-2000:]
+    msg = [ln for ln in res.stderr.splitlines() if ln.startswith("failed:")]
+    assert len(msg) == 1 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert "writing results failed: No space left on device" in msg[0], msg[0]
+    if step is not None:
+        assert msg[0].startswith(f"failed: step {step}, t = {step * 0.001:.6g}: "), msg[0]
+    got = read_results(out)
+    n = len(got["times"])
+    assert n >= 2 and got["times"] == pytest.approx([0.001 * i for i in range(n)], rel=0, abs=1e-15)
+    for values in got["fields"].values():
+        assert len(values) == n and all(np.all(np.isfinite(v)) for v in values.values())
+    rows = read_csv(out / "timeseries.csv")  # complete rows only
+    assert [int(r["step"]) for r in rows] == list(range(len(rows))) and len(rows) >= n - 1
+    return got
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_full_disk_injected_stops_like_a_failed_solve(tmp_path, monkeypatch, nproc):
+    """The data write of the 6th level (step 5) fails with ENOSPC half-way (test hook): exit 1, step and reason,
+    levels 0-4 intact and equal to a run that was not stopped."""
+    out, ref = tmp_path / "o", tmp_path / "ref"
+    assert cli([*FULL_DISK, "--set", "time.T=0.01", "--output", str(ref)], nproc).returncode == 0
+    monkeypatch.setenv("SOLVER_TEST_ENOSPC", "data:6")
+    got = _stopped_by_full_disk(cli([*FULL_DISK, "--output", str(out)], nproc), out, step=5)
+    assert len(got["times"]) == 5
+    want = read_results(ref)
+    for name, values in got["fields"].items():
+        for t, v in values.items():
+            assert np.allclose(v, want["fields"][name][t], rtol=1e-10, atol=1e-12), (name, t)
+
+
+def test_full_disk_on_a_small_file_system(tmp_path):
+    """A real full disk: a 2 MiB tmpfs (root only; elsewhere the injected test above stands for it)."""
+    mnt = tmp_path / "small"
+    mnt.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2m", "tmpfs", str(mnt)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a small tmpfs here (needs root)")
+    try:
+        res = cli([*FULL_DISK, "--output", str(mnt / "o")])
+        _stopped_by_full_disk(res, mnt / "o")
+    finally:
+        subprocess.run(["umount", str(mnt)], check=True)
+
+
+def test_output_directory_that_cannot_be_written(tmp_path):
+    """One line, exit 2, before any computation writes: a path through a file, and a read-only directory."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = cli(["run", "configs/example1.toml", "--output", str(blocker / "o"), *SMALL])
+    assert res.returncode == 2 and res.stderr.strip() == f"error: --output {blocker / 'o'}: cannot write there (Not a directory)"
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if os.geteuid() == 0:  # root writes through mode bits: make a read-only file system
+        if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(ro)], capture_output=True).returncode:
+            pytest.skip("cannot mount a read-only tmpfs here")
+    else:
+        ro.chmod(0o555)
+    try:
+        res = cli(["run", "configs/example1.toml", "--output", str(ro / "o"), *SMALL])
+        assert res.returncode == 2 and "Traceback" not in res.stderr
+        reason = "Read-only file system" if os.geteuid() == 0 else "Permission denied"
+        assert res.stderr.strip() == f"error: --output {ro / 'o'}: cannot write there ({reason})", res.stderr
+    finally:
+        subprocess.run(["umount", str(ro)], capture_output=True) if os.geteuid() == 0 else ro.chmod(0o755)

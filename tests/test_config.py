@@ -1,11 +1,10 @@
 """Scenes: defaults are the paper's, overrides, round trip, traction tables, and rejections."""
 
-import tomllib
 
 import pytest
 from conftest import ROOT
 
-from solver.config import Config, ConfigError, apply_overrides, dumps, from_dict, load
+from solver.config import SECTIONS, Config, ConfigError, apply_overrides, dumps, from_dict, load, to_dict
 
 
 def test_defaults_are_example1():
@@ -159,7 +158,7 @@ def test_override_syntax():
     with pytest.raises(ConfigError, match="section.key"):
         apply_overrides({}, ["nx=3"])
     assert apply_overrides({}, ["mesh.diagonal=left"]) == {"mesh": {"diagonal": "left"}}
-    assert tomllib.loads("a = 1")  # the value syntax is TOML's
+    assert apply_overrides({}, ["mesh.nx=3"]) == {"mesh": {"nx": 3}}  # the value syntax is TOML's
 
 
 def test_new_keys_round_trip_and_defaults(tmp_path):
@@ -201,3 +200,51 @@ def test_gap_table_on_a_gmsh_part_needs_its_coordinate():
     assert err.value.key == "boundary.contact.gap_coordinate"
     data["boundary"]["contact"]["gap_coordinate"] = "y"
     assert from_dict(data, base=ROOT).contact[0].gap_table == ((0.0, 0.0), (1.0, 0.1))
+
+
+    # values are TOML; a bare word is a string
+    assert apply_overrides({}, ["time.k=1e-3", "mesh.corners=[[0, 0], [2, 1]]", "solver.linear=mumps"]) == {
+        "time": {"k": 1e-3}, "mesh": {"corners": [[0, 0], [2, 1]]}, "solver": {"linear": "mumps"}}
+
+
+def test_errors_carry_the_key_value_and_what_is_allowed():
+    with pytest.raises(ConfigError) as err:
+        from_dict({"mesh": {"nx": 0}}, source="s.toml")
+    assert (err.value.source, err.value.key, err.value.value) == ("s.toml", "mesh.nx", 0)
+    assert err.value.allowed == "must be at least 1"
+    with pytest.raises(ConfigError) as err:
+        from_dict({"meshes": {}})
+    assert err.value.key == "meshes" and all(s.key in err.value.allowed for s in SECTIONS)
+
+
+def test_sections_registry_drives_parsing_and_writing():
+    cfg = from_dict({})
+    assert list(to_dict(cfg)) == [s.key for s in SECTIONS]
+    assert all(hasattr(cfg, s.attr) for s in SECTIONS)
+    with pytest.raises(ConfigError) as err:
+        from_dict({"material": {"model": "3d"}})  # the material section sees the mesh's dimension
+    assert err.value.key == "material.model"
+
+
+@pytest.mark.parametrize("data,key", [
+    ({"discretization": {"u_degree": 3}}, "discretization.u_degree"),
+    ({"discretization": {"zeta_degree": 0}}, "discretization.zeta_degree"),
+    ({"time": {"order": 3}}, "time.order"),
+    ({"time": {"order": 2}, "memory": {"kernel": "tabulated", "table": [[0, 1], [1, 1]]}}, "memory.kernel"),
+    ({"time": {"order": 2}, "memory": {"rule": "left"}}, "memory.rule"),
+    ({"time": {"order": 2}, "solver": {"damage_scheme": "semi_implicit"}}, "solver.damage_scheme"),
+])
+def test_discretization_and_order_are_validated(data, key):
+    with pytest.raises(ConfigError) as err:
+        from_dict(data)
+    assert err.value.key == key
+
+
+def test_degrees_choose_the_quadrature_and_the_order_chooses_the_memory_rule():
+    p1 = from_dict({})
+    assert (p1.solver.quadrature_degree, p1.solver.contact_quadrature_degree, p1.memory.rule) == (1, 2, "left")
+    p2 = from_dict({"discretization": {"u_degree": 2}, "time": {"order": 2}})
+    assert (p2.solver.quadrature_degree, p2.solver.contact_quadrature_degree) == (3, 4)
+    assert p2.memory.rule == "trapezoid_extrapolated"
+    mine = from_dict({"discretization": {"u_degree": 2}, "solver": {"quadrature_degree": 5}})
+    assert mine.solver.quadrature_degree == 5  # an explicit setting wins

@@ -1,13 +1,15 @@
 """Damage source (eta, Psi, phi) against hand values and the damage step's invariants."""
 
+
 import numpy as np
 import pytest
-from conftest import eval_point, unit_mesh
+from conftest import ROOT, eval_point, solve, unit_mesh
 from dolfinx import fem
 from mpi4py import MPI
 
-from solver.config import DamageConfig
+from solver.config import DamageConfig, load
 from solver.damage import Damage, eta, psi, source
+from solver.errors import DamageSolveError
 
 
 def phi_hand(eps, z, c: DamageConfig) -> float:
@@ -89,3 +91,30 @@ def test_clipping_counts_and_bounds(comm):
     assert info.clipped == nglobal
     assert info.raw_min < cfg.zeta_star
     assert np.all(d.zeta.x.array >= cfg.zeta_star)
+
+
+def test_semi_implicit_damage_is_linearised_implicit_euler(comm):
+    """With eps = 0 and a uniform zeta the semi-implicit step is z + k phi / (1 - k phi_z), exactly."""
+    from dolfinx import mesh
+
+    m = mesh.create_unit_square(comm, 4, 4)
+    u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
+    cfg = DamageConfig(lambda1=0.5, zeta0=0.9, clip=False)
+    k = 0.1
+    d = Damage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2, scheme="semi_implicit")
+    z = 0.9
+    for _ in range(4):
+        d.step()
+        phi, phi_z = -cfg.lambda1 * (1 - z) / z, cfg.lambda1 / z**2
+        z = z + k * phi / (1 - k * phi_z)
+        assert np.allclose(d.zeta.x.array, z, rtol=0, atol=1e-13)
+
+
+def test_semi_implicit_damage_refuses_an_unstable_step(comm):
+    """On the hard scene zeta nears zeta* and k lambda1 / zeta^2 passes 1 at k = 0.1: a named failure,
+    where clipping would otherwise hide a zeta of about -50."""
+    cfg = load(ROOT / "configs/hard.toml", ["mesh.nx=8", "mesh.ny=8", "time.k=0.1",
+                                            "solver.damage_scheme='semi_implicit'"])
+    with pytest.raises(DamageSolveError) as err:
+        solve(cfg, comm)
+    assert err.value.reason == "SEMI_IMPLICIT_UNSTABLE" and err.value.step >= 1

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import solve
+from conftest import ROOT, solve
 from mpi4py import MPI
 
 from solver.config import from_dict
@@ -129,3 +129,58 @@ def test_block_pressed_by_foundation_3d(tmp_path):
     assert np.abs(u[:, 2] - a * (1 - x[:, 2])).max() < 1e-9 * a
     assert np.abs(u[:, :2]).max() < 1e-12
     assert rows[-1]["contact_force"] == pytest.approx(E * a, rel=1e-6)
+
+
+def test_p2_elastic_contact_matches_an_independent_p2_solve(comm):
+    """Example 1 at t = 0 with u_degree = 2, n = 16, against the same static problem written here in plain dolfinx
+    (P2, plane stress, clamped left, load (-10, -10) on the right, p(r) = r+/1e-10 on the bottom with a degree-4
+    facet rule) and solved by dolfinx's own Newton solver: u(1, 1) to 1e-8."""
+    import ufl
+    from dolfinx import fem, mesh, nls
+    from dolfinx.fem import petsc as fpetsc
+
+    from solver.config import load
+    from solver.post import point_value
+    from solver.stepper import Stepper
+
+    msh = mesh.create_unit_square(comm, 16, 16)
+    V = fem.VectorFunctionSpace(msh, ("CG", 2))
+    E, nu = 100.0, 0.3
+    lam, mu_l = E * nu / (1 - nu**2), E / (2 * (1 + nu))
+    fdim = msh.topology.dim - 1
+    sides = {1: lambda x: np.isclose(x[0], 0.0), 2: lambda x: np.isclose(x[0], 1.0), 3: lambda x: np.isclose(x[1], 0.0)}
+    found = [(mesh.locate_entities_boundary(msh, fdim, f), tag) for tag, f in sides.items()]
+    idx = np.concatenate([f for f, _ in found])
+    val = np.concatenate([np.full(len(f), tag, dtype=np.int32) for f, tag in found])
+    order = np.argsort(idx)
+    tags = mesh.meshtags(msh, fdim, idx[order], val[order])
+    ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+    u, w = fem.Function(V), ufl.TestFunction(V)
+    n = ufl.FacetNormal(msh)
+
+    def eps(v):
+        return ufl.sym(ufl.grad(v))
+
+    sigma = lam * ufl.tr(eps(u)) * ufl.Identity(2) + 2 * mu_l * eps(u)
+    f = fem.Constant(msh, np.array([-10.0, -10.0]))
+    F = (ufl.inner(sigma, eps(w)) * ufl.dx - ufl.dot(f, w) * ds(2)
+         + ufl.max_value(ufl.dot(u, n), 0.0) / 1e-10 * ufl.dot(w, n) * ds(3, metadata={"quadrature_degree": 4}))
+    clamped = fem.locate_dofs_topological(V, fdim, tags.find(1))
+    bc = fem.dirichletbc(np.zeros(2), clamped, V)
+    problem = fpetsc.NonlinearProblem(F, u, bcs=[bc])
+    newton = nls.petsc.NewtonSolver(comm, problem)
+    newton.convergence_criterion, newton.rtol, newton.atol, newton.max_it = "incremental", 1e-13, 0.0, 50
+    ksp = newton.krylov_solver
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    its, converged = newton.solve(u)
+    assert converged
+
+    cfg = load(ROOT / "configs/example1.toml",
+               ["mesh.nx=16", "mesh.ny=16", "discretization.u_degree=2"])
+    model = build_model(cfg, comm)
+    assert cfg.solver.contact_quadrature_degree == 4
+    Stepper(model).step(0)
+    ours, theirs = point_value(model.u, [1.0, 1.0]), point_value(u, [1.0, 1.0])
+    print(f"u(1, 1): ours {ours}, independent {theirs}, difference {np.abs(ours - theirs).max():.2e}")
+    assert np.abs(ours - theirs).max() <= 1e-8, (ours, theirs)

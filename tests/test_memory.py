@@ -5,11 +5,12 @@ import math
 import numpy as np
 import pytest
 import ufl
-from conftest import unit_mesh
+from conftest import solve, unit_mesh
 from dolfinx import fem
 from mpi4py import MPI
 
-from solver.config import MemoryConfig
+from solver.config import MemoryConfig, from_dict
+from solver.errors import ConfigError
 from solver.material import elasticity, lame, strain
 from solver.memory import MemorySource, PronyHistory, QuadratureRule, TabulatedHistory, make_history, memory_source
 
@@ -131,7 +132,7 @@ def test_plane_strain_sigma_33_has_its_memory_part(comm, kernel):
     truncated (L = 3 < lambda tr eps); the von Mises value includes it."""
     from solver.config import from_dict
     from solver.io import von_mises_array
-    from solver.outputs import Outputs
+    from solver.outputs import CellStresses
     from solver.stepper import build_model
 
     E, nu, t, k, L, zeta0 = 100.0, 0.3, 10.0, 0.1, 3.0, 0.8
@@ -142,7 +143,7 @@ def test_plane_strain_sigma_33_has_its_memory_part(comm, kernel):
                      "right": {"role": "traction", "traction": [t, 0.0]}},
         "memory": {**kernel, "L": L}, "damage": {"enabled": False, "zeta0": zeta0}, "time": {"T": 0.4, "k": k}})
     model = build_model(cfg, comm)
-    out = Outputs(model, cfg.material, None)
+    cells = CellStresses(model, cfg.material)
     lam, mu = lame(E, nu, "plane_strain")
     A2 = np.array([[lam + 2 * mu, lam], [lam, lam + 2 * mu]])
     g = (lambda s: 1.0) if kernel["kernel"] == "constant" else (lambda s: -math.exp(-s))
@@ -153,12 +154,79 @@ def test_plane_strain_sigma_33_has_its_memory_part(comm, kernel):
         exx, eyy = np.linalg.solve(A2, [t - M[0], -M[1]])
         s33_el = lam * (exx + eyy)
         H.append(zeta0 * np.clip([t - M[0], -M[1], s33_el], -L, L))
-        out.update_cell_fields()
-        ncell = out.von_mises.function_space.dofmap.index_map.size_local
-        zz, zz_el = out.zz[0].x.array[:ncell], out.zz[1].x.array[:ncell]
+        elastic = cells.elastic()
+        zz, zz_el = cells.out_of_plane()
+        vm = von_mises_array(cells.total(elastic), 2, zz)
         assert np.allclose(zz_el, s33_el, rtol=1e-10, atol=0), n
         assert np.allclose(zz, s33_el + M[2], rtol=1e-10, atol=0), n
         want_vm = von_mises_array(np.array([t, 0.0, 0.0, 0.0]), 2, np.array([s33_el + M[2]]))[0]
-        assert np.allclose(out.von_mises.x.array[:ncell], want_vm, rtol=1e-10, atol=0), n
+        assert np.allclose(vm, want_vm, rtol=1e-10, atol=0), n
         model.history.commit(n)
     assert abs(H[0][2]) == pytest.approx(zeta0 * L)  # the truncation of the 33 entry acted
+
+
+def _patch(rule: str, k: float):
+    return from_dict({
+        "mesh": {"nx": 4, "ny": 3, "corners": [[0, 0], [2, 1]]},
+        "boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [10.0, 0.0]}},
+        "material": {"E": 100.0, "nu": 0.0},
+        "memory": {"kernel": "exponential", "weights": [-1.0], "times": [1.0], "L": 6.0, "rule": rule},
+        "damage": {"enabled": False, "zeta0": 0.8},
+        "time": {"T": 0.5, "k": k},
+    })
+
+
+def test_trapezoidal_memory_patch_closed_form(comm):
+    """Uniform stress t = E eps_n + P_n + (k/2) g(0) zeta0 min(L, E eps_n), P by the trapezoid
+    recursion (H_0 at weight k/2): the implicit current-level term, truncation acting."""
+    E, t, k, z0, L, c = 100.0, 10.0, 0.1, 0.8, 6.0, -1.0
+    model, rows = solve(_patch("trapezoid", k), comm)
+    d = math.exp(-k)
+    P, eps = 0.0, []
+    for n in range(len(rows)):
+        if n == 1:
+            P = d * 0.5 * k * c * z0 * min(L, E * eps[0])
+        elif n > 1:
+            P = d * (P + k * c * z0 * min(L, E * eps[-1]))
+        # E e + (k/2) c z0 min(L, E e) = t - P, piecewise linear in e
+        a = 0.5 * k * c * z0 if n > 0 else 0.0
+        e = (t - P) / (E + a * E)
+        if E * e > L:
+            e = (t - P - a * L) / E
+        eps.append(e)
+    x = model.u.function_space.tabulate_dof_coordinates()
+    ux = model.u.x.array.reshape(-1, 2)[:, 0]
+    sel = np.isclose(x[:, 0], 2.0)
+    got = comm.allreduce(float(ux[sel].max() / 2.0) if sel.any() else -np.inf, op=MPI.MAX)
+    assert got == pytest.approx(eps[-1], rel=1e-10)
+
+
+def test_trapezoid_is_more_accurate_in_time(comm):
+    """Final strain of the patch: the trapezoid at k = 0.1 is closer to a fine left-rule run than the left rule."""
+    def final(rule, k):
+        return solve(_patch(rule, k), comm)[1][-1]["strain_norm"]
+    fine = final("left", 0.005)
+    assert abs(final("trapezoid", 0.1) - fine) < 0.3 * abs(final("left", 0.1) - fine)
+
+
+def test_trapezoid_needs_newton():
+    with pytest.raises(ConfigError) as err:
+        from_dict({"memory": {"rule": "trapezoid"}, "solver": {"method": "penalty_duality"}})
+    assert err.value.key == "memory.rule"
+
+
+@pytest.mark.parametrize("rule", ["trapezoid", "trapezoid_extrapolated"])
+def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
+    """M_0 = 0: level 0 does not depend on the rule or on k (the implicit trapezoid once added its term there)."""
+    from conftest import ROOT
+
+    from solver.config import load
+    from solver.stepper import Stepper, build_model
+
+    def level0(r, k):
+        model = build_model(load(ROOT / "configs/example1.toml", ["mesh.nx=4", "mesh.ny=4", f"time.k={k}",
+                                                                  f"memory.rule='{r}'"]), comm)
+        return Stepper(model).step(0)["strain_norm"]
+
+    assert level0(rule, 0.1) == pytest.approx(level0("left", 0.1), rel=1e-12)
+    assert level0(rule, 0.05) == pytest.approx(level0("left", 0.1), rel=1e-12)

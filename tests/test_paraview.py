@@ -1,5 +1,8 @@
-"""``python -m solver paraview`` renders a results directory with ParaView's pvbatch (skipped without ParaView)."""
+"""``python -m solver paraview`` renders a results directory with ParaView's pvbatch (skipped without ParaView),
+and ParaView's three XDMF readers read what solver/xdmf.py writes."""
 
+import json
+import os
 import re
 import subprocess
 import sys
@@ -16,10 +19,18 @@ RENDER = "import sys; from solver.paraview import main; sys.exit(main(sys.argv[1
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    """A tiny example-1 run: 6 x 6 mesh, times 0, 0.25, ..., 1."""
+def paraview():
+    """Skip (with the reason the command itself would give) unless pvbatch runs with its Python modules."""
     if not spv.available():
         pytest.skip("ParaView (pvbatch) is not installed: apt-get install paraview")
+    problem = spv.python_problem()
+    if problem:
+        pytest.skip(problem.removeprefix("error: "))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory, paraview):
+    """A tiny example-1 run: 6 x 6 mesh, times 0, 0.25, ..., 1."""
     out = tmp_path_factory.mktemp("paraview") / "r"
     run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
            "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.25"]
@@ -32,6 +43,7 @@ def render(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", RENDER, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_paraview_renders_von_mises(results):
     png = results / "pv.png"
     res = render(str(results), "--field", "von_mises", "--output", str(png), "--size", "900", "600")
@@ -49,6 +61,7 @@ def test_paraview_renders_von_mises(results):
     assert np.unique(img.reshape(-1, img.shape[-1]), axis=0).shape[0] > 50  # a picture, not a blank
 
 
+@pytest.mark.slow
 def test_paraview_default_output_and_bad_field(results):
     res = render(str(results), "--time", "0.5", "--warp", "1")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
@@ -62,3 +75,97 @@ def test_paraview_missing_is_one_line(monkeypatch, capsys):
     assert not spv.available()
     assert spv.main([str(ROOT / "results")]) == 2
     assert capsys.readouterr().err.strip() == spv.NOT_INSTALLED
+
+
+FAKE_PVBATCH = """#!/bin/sh
+# pvbatch as Debian's paraview package installs it without python3-paraview: no 'paraview' module
+shift  # --force-offscreen-rendering
+exec {python} -c '{code}' "$@"
+"""
+FAKE_CODE = ('import runpy, sys; sys.modules["paraview"] = None; sys.argv = sys.argv[1:]; '
+             'runpy.run_path(sys.argv[0], run_name="__main__")')
+
+
+def test_pvbatch_without_python_modules_is_one_line(tmp_path):
+    """pvbatch present, python3-paraview not: one line saying what to install, exit 2, no retry."""
+    fake = tmp_path / "pvbatch"
+    fake.write_text(FAKE_PVBATCH.format(python=sys.executable, code=FAKE_CODE))
+    fake.chmod(0o755)
+    env = dict(os.environ, PATH=f"{tmp_path}{os.pathsep}{os.environ['PATH']}", DISPLAY=":99")
+    res = subprocess.run([sys.executable, "-c", RENDER, str(tmp_path)], cwd=ROOT, env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.strip() == "error: ParaView's Python modules are not installed, which pvbatch needs " \
+                                 "(Debian: apt-get install python3-paraview)", res.stderr
+    assert spv.python_problem(str(fake)) == res.stderr.strip()
+
+
+READ_ALL = """
+import json, sys
+import paraview.simple as pvs
+from paraview import servermanager as sm
+from vtkmodules.util.numpy_support import vtk_to_numpy
+out = {}
+for name in ("Xdmf3ReaderS", "Xdmf3ReaderT", "XDMFReader"):
+    r = pvs.XDMFReader(FileNames=[sys.argv[1]]) if name == "XDMFReader" else getattr(pvs, name)(FileName=[sys.argv[1]])
+    times = [float(t) for t in r.TimestepValues]
+    r.UpdatePipeline(times[-1])
+    d = sm.Fetch(r)
+    while d.IsA("vtkMultiBlockDataSet"):
+        d = d.GetBlock(0)
+    arrays = {}
+    for data in (d.GetPointData(), d.GetCellData()):
+        for i in range(data.GetNumberOfArrays()):
+            a = data.GetArray(i)
+            arrays[a.GetName()] = {"type": a.GetDataTypeAsString(), "values": vtk_to_numpy(a).tolist(),
+                                   "components": [a.GetComponentName(c) for c in range(a.GetNumberOfComponents())]}
+    info = {k: [r.CellData[k].GetComponentName(c) for c in range(r.CellData[k].GetNumberOfComponents())]
+            for k in r.CellData.keys()}
+    out[name] = {"times": times, "arrays": arrays, "gui_components": info,
+                 "points": vtk_to_numpy(d.GetPoints().GetData()).tolist()}
+    pvs.Delete(r)
+json.dump(out, open(sys.argv[2], "w"))
+"""
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_paraview_readers_read_the_series(tmp_path, paraview, closed):
+    """All three readers: every time, the values of the last level as written (float64 stays float64); with
+    Xdmf3ReaderS/T the stress is a symmetric tensor whose components ParaView names XX ... XZ. Also the
+    padded file a killed run leaves (closed=False)."""
+    from mpi4py import MPI
+    from test_xdmf import FIELDS, Scene
+
+    scene = Scene(MPI.COMM_SELF, n=3)
+    w = scene.series(tmp_path / "r", expected_levels=4)
+    times = [0.0, 1 / 3, 2 / 3, 1.0]
+    for t in times:
+        last = scene.values(t)
+        w.write(t, last)
+    w.close() if closed else None
+    script = tmp_path / "read_all.py"
+    script.write_text(READ_ALL)
+    got = subprocess.run([spv.executable(), str(script), str(tmp_path / "r" / "solution.xdmf"), str(tmp_path / "o.json")],
+                         env=spv.environment(), capture_output=True, text=True, timeout=300)
+    assert got.returncode == 0, got.stderr[-3000:]
+    seen = json.loads((tmp_path / "o.json").read_text())
+    from solver.xdmf import read_series
+
+    ref = read_series(tmp_path / "r" / "solution.xdmf")  # file order; ParaView keeps it
+    for reader, r in seen.items():
+        assert r["times"] == pytest.approx(times, rel=0, abs=1e-15), reader
+        assert np.array_equal(np.array(r["points"])[:, :2], ref["points"]), reader
+        assert set(r["arrays"]) == {f.name for f in FIELDS}, reader
+        for f in FIELDS:
+            a = r["arrays"][f.name]
+            assert a["type"] == "double", (reader, f.name)
+            want = ref["fields"][f.name][-1]
+            values = np.array(a["values"])
+            if reader == "XDMFReader" and f.kind == "Tensor6":  # the legacy reader expands to 9 (XX XY XZ YY YZ ZZ)
+                assert values.shape == (len(want), 9), reader
+                continue
+            assert np.array_equal(values.reshape(want.shape), want), (reader, f.name)
+        if reader != "XDMFReader":
+            assert r["gui_components"]["stress"] == ["XX", "YY", "ZZ", "XY", "YZ", "XZ"], reader
+    # the written values are those in memory at the last level
+    assert np.array_equal(ref["fields"]["damage"][-1], last["damage"].ravel()[np.argsort(scene.layout.node_keys)])

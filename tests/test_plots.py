@@ -11,6 +11,7 @@ from conftest import ROOT
 pytestmark = pytest.mark.serial  # starts its own processes
 
 
+@pytest.mark.slow
 def test_plot_writes_pictures(tmp_path):
     env = dict(os.environ)
     out = tmp_path / "r"

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from .fields import Ctx, check_keys, names, need, number, string, vector
 
 KERNELS = ("none", "constant", "exponential", "tabulated")
-RULES = ("left", "trapezoid")
+RULES = ("auto", "left", "trapezoid", "trapezoid_extrapolated")
+SECOND_ORDER_RULES = ("trapezoid", "trapezoid_extrapolated")
 _USES = {"none": (), "constant": ("weights",), "exponential": ("weights", "times"), "tabulated": ("table",)}
 
 
@@ -19,8 +20,10 @@ class MemoryConfig:
     ``constant``: g = weights[0]; ``exponential``: g(s) = sum_i weights[i]
     exp(-s/times[i]) (a Prony series); ``tabulated``: g given by ``table``
     rows [s, g(s)], linear in between (keeps the full past); ``none``: no memory.
-    ``rule``: the paper's left-rectangle sum, or the trapezoidal rule (implicit in the
-    current level: Newton only, one factorization per step).
+    ``rule``: ``left``, the paper's left-rectangle sum; ``trapezoid``, the trapezoidal rule implicit
+    in the current level (Newton only, one factorization per step); ``trapezoid_extrapolated``, the
+    trapezoidal rule with the current level's u extrapolated from the two before (explicit: no
+    refactorization); ``auto``: left for ``time.order = 1``, trapezoid_extrapolated for 2.
     """
 
     kernel: str = "constant"
@@ -28,7 +31,7 @@ class MemoryConfig:
     times: tuple[float, ...] = ()
     table: tuple[tuple[float, float], ...] = ()
     L: float = 1000.0
-    rule: str = "left"
+    rule: str = "auto"
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
@@ -36,8 +39,16 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     d = MemoryConfig()
     kernel = string(ctx, "memory.kernel", t.get("kernel", d.kernel), KERNELS)
     rule = string(ctx, "memory.rule", t.get("rule", d.rule), RULES)
-    if rule == "trapezoid" and kernel not in ("constant", "exponential"):
-        raise ctx.fail("memory.rule", rule, "the trapezoidal rule is for constant and exponential kernels")
+    order = scene["time"].order
+    if rule == "auto":
+        rule = "trapezoid_extrapolated" if order == 2 and kernel in ("constant", "exponential") else "left"
+    if rule in SECOND_ORDER_RULES and kernel not in ("constant", "exponential"):
+        raise ctx.fail("memory.rule", rule, "the trapezoidal rules are for constant and exponential kernels")
+    if order == 2 and kernel == "tabulated":
+        raise ctx.fail("memory.kernel", kernel, "time.order = 2 needs a constant or exponential kernel "
+                       "(a tabulated kernel keeps the first-order left-rectangle sum)")
+    if order == 2 and rule == "left" and kernel != "none":
+        raise ctx.fail("memory.rule", rule, "time.order = 2 needs a second-order rule: trapezoid or trapezoid_extrapolated")
     L = number(ctx, "memory.L", t.get("L", d.L))
     need(ctx, "memory.L", L, L > 0, "must be > 0")
     for key in ("weights", "times", "table"):

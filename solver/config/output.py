@@ -1,4 +1,4 @@
-"""[output]: where and how often results and checkpoints are written."""
+"""[output]: where and how often results and checkpoints are written, which fields and in what precision."""
 
 from __future__ import annotations
 
@@ -7,16 +7,38 @@ from dataclasses import dataclass
 
 from .fields import Ctx, boolean, check_keys, integer, names, need, string
 
+# the fields a run can write (solver/outputs.py says what each is)
+FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz",
+               "elastic_stress_zz")  # the last two: plane strain only (sigma_33), skipped elsewhere
+# what a ParaView user needs to warp the body and colour it as the paper does; the two tensors
+# (6 values per cell each) triple the bytes per level and are written only on request
+DEFAULT_FIELDS = ("displacement", "damage", "von_mises", "von_mises_elastic")
+PRECISIONS = ("double", "single")
+
 
 @dataclass(frozen=True)
 class OutputConfig:
-    """Where and how often results are written (every=0: first and last only), and checkpoints
-    every ``checkpoint_every`` steps (0: none)."""
+    """Where and how often results are written (every=0: first and last only), which ``fields``
+    (``damage`` only where the scene has damage, ``stress_zz``/``elastic_stress_zz`` only in plane strain) in
+    which ``precision``, and checkpoints every
+    ``checkpoint_every`` steps (0: none)."""
 
     directory: str = "results"
     every: int = 1
     xdmf: bool = True
+    fields: tuple[str, ...] = DEFAULT_FIELDS
+    precision: str = "double"
     checkpoint_every: int = 100
+
+
+def _fields(ctx: Ctx, v) -> tuple[str, ...]:
+    allowed = "a non-empty list of field names from " + ", ".join(FIELD_NAMES)
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise ctx.fail("output.fields", v, allowed)
+    for x in v:
+        need(ctx, "output.fields", x, x in FIELD_NAMES, "not a field; allowed: " + ", ".join(FIELD_NAMES))
+    need(ctx, "output.fields", v, len(set(v)) == len(v), "names a field twice")
+    return tuple(v)
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> OutputConfig:
@@ -28,9 +50,11 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> OutputConfig:
     every = integer(ctx, "output.every", t.get("every", d.every))
     need(ctx, "output.every", every, every >= 0, "must be >= 0 (0 writes the first and last levels only)")
     xdmf = boolean(ctx, "output.xdmf", t.get("xdmf", d.xdmf))
+    fields = _fields(ctx, t.get("fields", list(d.fields)))
+    precision = string(ctx, "output.precision", t.get("precision", d.precision), PRECISIONS)
     ckpt = integer(ctx, "output.checkpoint_every", t.get("checkpoint_every", d.checkpoint_every))
     need(ctx, "output.checkpoint_every", ckpt, ckpt >= 0, "must be >= 0 (0: no checkpoints)")
-    return OutputConfig(directory, every, xdmf, ckpt)
+    return OutputConfig(directory, every, xdmf, fields, precision, ckpt)
 
 
 def to_toml(m: OutputConfig) -> dict:

@@ -17,10 +17,11 @@ from typing import Any, NamedTuple
 import tomlkit
 
 from ..errors import ConfigError
-from . import body_force, boundary, damage, material, memory, mesh, output, solver, time
+from . import body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
 from .body_force import BodyForceConfig
 from .boundary import BoundaryConfig
 from .damage import DamageConfig
+from .discretization import DiscretizationConfig
 from .fields import Ctx
 from .material import MaterialConfig
 from .memory import MemoryConfig
@@ -45,9 +46,10 @@ SECTIONS: tuple[Section, ...] = (
     Section("boundary", "boundaries", boundary.parse, boundary.to_toml, None),
     Section("body_force", "body_force", body_force.parse, body_force.to_toml, {}),
     Section("material", "material", material.parse, material.to_toml, {}),
+    Section("discretization", "discretization", discretization.parse, discretization.to_toml, {}),
+    Section("time", "time", time.parse, time.to_toml, {}),
     Section("memory", "memory", memory.parse, memory.to_toml, {}),
     Section("damage", "damage", damage.parse, damage.to_toml, {}),
-    Section("time", "time", time.parse, time.to_toml, {}),
     Section("solver", "solver", solver.parse, solver.to_toml, {}),
     Section("output", "output", output.parse, output.to_toml, {}),
 )
@@ -61,6 +63,7 @@ class Config:
     boundaries: tuple[BoundaryConfig, ...] = ()
     body_force: BodyForceConfig = field(default_factory=BodyForceConfig)
     material: MaterialConfig = field(default_factory=MaterialConfig)
+    discretization: DiscretizationConfig = field(default_factory=DiscretizationConfig)
     memory: MemoryConfig = field(default_factory=MemoryConfig)
     damage: DamageConfig = field(default_factory=DamageConfig)
     time: TimeConfig = field(default_factory=TimeConfig)

@@ -26,9 +26,9 @@ class SolverConfig:
     method: str = "newton"
     penalty_duality_omega: float = 0.5
     damage_scheme: str = "explicit"
-    quadrature_degree: int = 1
-    damage_quadrature_degree: int = 2
-    contact_quadrature_degree: int = 2
+    quadrature_degree: int = 0  # 0: from the degrees ([discretization]); resolved when parsed
+    damage_quadrature_degree: int = 0
+    contact_quadrature_degree: int = 0
     petsc_options: tuple[tuple[str, str], ...] = ()
 
 
@@ -44,9 +44,13 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
     omega = number(ctx, "solver.penalty_duality_omega", t.get("penalty_duality_omega", d.penalty_duality_omega))
     need(ctx, "solver.penalty_duality_omega", omega, omega > 0, "must be > 0 (omega = value / mu)")
     damage_scheme = string(ctx, "solver.damage_scheme", t.get("damage_scheme", d.damage_scheme), DAMAGE_SCHEMES)
+    disc = scene["discretization"]
+    auto = {"quadrature_degree": disc.memory_quadrature_degree(),
+            "damage_quadrature_degree": 2 * disc.zeta_degree + 2 * (disc.u_degree - 1),
+            "contact_quadrature_degree": disc.contact_quadrature_degree()}
     degs = {}
     for key in _DEGREES:
-        degs[key] = integer(ctx, f"solver.{key}", t.get(key, getattr(d, key)))
+        degs[key] = integer(ctx, f"solver.{key}", t.get(key, auto[key]))
         need(ctx, f"solver.{key}", degs[key], 1 <= degs[key] <= 10, "must be in 1..10")
     has_contact = any(b.role == "contact" for b in scene["boundary"])
     if method != "newton" and has_contact and scene["dim"] != 2:
@@ -58,6 +62,8 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
                        "so no omega fits; use 'newton' or 'fixed_point'")
     if scene["memory"].rule == "trapezoid" and method != "newton" and has_contact:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
+    if damage_scheme == "semi_implicit" and scene["time"].order == 2:
+        raise ctx.fail("solver.damage_scheme", damage_scheme, "is first order; time.order = 2 uses its own damage step")
     return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs,
                         petsc_options=_petsc_options(ctx, t.get("petsc_options", {})))
 

@@ -1,0 +1,47 @@
+"""The failure types: fields, composed messages, and the status words studies use."""
+
+import pytest
+
+from solver.errors import (
+    ConfigError,
+    DamageSolveError,
+    DisplacementSolveError,
+    InputError,
+    NonFiniteError,
+    SolveFailure,
+    UsageError,
+)
+
+
+def test_config_error_composes_its_message_from_fields():
+    err = ConfigError(source="s.toml", key="mesh.nx", value=0, allowed="must be at least 1")
+    assert str(err) == "s.toml: mesh.nx = 0: must be at least 1"
+    assert (err.key, err.value, err.allowed) == ("mesh.nx", 0, "must be at least 1")
+    assert str(ConfigError(key="time.k", value="x", allowed="must be a number")) == "time.k = 'x': must be a number"
+    assert isinstance(err, InputError) and isinstance(UsageError("u"), InputError)
+
+
+def test_a_failure_learns_where_it_happened():
+    err = DisplacementSolveError("SNES", "DIVERGED_MAX_IT", 4, [1.0, 0.5, 0.25], 1e-10, linear_reason=-3)
+    assert err.step is None and "step" not in str(err)
+    assert err.at(7, 0.35) is err
+    assert (err.step, err.t) == (7, 0.35)
+    assert str(err).startswith("step 7, t = 0.35: displacement solve failed: SNES DIVERGED_MAX_IT, linear solve -3")
+    assert err.residuals == [1.0, 0.5, 0.25] and err.tolerance == 1e-10
+    assert str(err.args[0]) == str(err)  # what an uncaught traceback would print
+
+
+@pytest.mark.parametrize("reason,status", [
+    ("DIVERGED_RESIDUAL_GROWTH", "diverged"), ("DIVERGED_FNORM_NAN", "diverged"),
+    ("DIVERGED_STAGNATION", "stagnated"), ("DIVERGED_MAX_IT", "too_many_iterations"),
+    ("DIVERGED_LINEAR_SOLVE", "failed"),
+])
+def test_status_words_follow_the_reason_field(reason, status):
+    assert DisplacementSolveError("newton", reason, 1, [1.0], 1.0).status == status
+
+
+def test_other_failures_have_their_own_status():
+    assert DamageSolveError("DIVERGED_ITS").status == "damage_failed"
+    nf = NonFiniteError(["memory", "displacement", "memory"])
+    assert nf.fields == ["displacement", "memory"] and nf.status == "non_finite"
+    assert all(isinstance(e, SolveFailure) for e in (nf, DamageSolveError("x")))

@@ -1,0 +1,81 @@
+"""The written cell stresses (solver/outputs.py) equal the L2 projection onto cell constants assembled from UFL."""
+
+import numpy as np
+import pytest
+import ufl
+from conftest import ROOT
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from petsc4py import PETSc
+
+from solver.config import load
+from solver.io import von_mises_array
+from solver.material import elasticity, strain
+from solver.outputs import CellStresses, Outputs
+from solver.stepper import Stepper, build_model
+
+
+def projection(expr, mesh, dx) -> np.ndarray:
+    """(integral of expr over K) / |K| for the owned cells K, by assembly (the reference)."""
+    T0 = fem.TensorFunctionSpace(mesh, ("DG", 0))
+    S0 = fem.FunctionSpace(mesh, ("DG", 0))
+    b = fpetsc.assemble_vector(fem.form(ufl.inner(expr, ufl.TestFunction(T0)) * dx))
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))
+    vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    n = T0.dofmap.index_map.size_local
+    d = mesh.geometry.dim
+    values = b.array_r.reshape(n, d * d) / vol.array_r[:n, None]
+    imap = mesh.topology.index_map(mesh.topology.dim)
+    cell_dof = T0.dofmap.list.array.reshape(imap.size_local + imap.num_ghosts, -1)[: imap.size_local, 0]
+    return values[cell_dof]
+
+
+@pytest.mark.parametrize("degree,model", [(1, "plane_stress"), (2, "plane_stress"), (1, "plane_strain")])
+def test_cell_stresses_equal_the_assembled_projection(comm, degree, model):
+    """Example 1 (memory, damage) after 5 steps, with 1- and 3-point memory rules, serial and on 2 ranks."""
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05",
+                                                f"solver.quadrature_degree={degree}", f"material.model={model}"])
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(6):
+        stepper.step(n)
+    mesh, mat = model.geo.mesh, cfg.material
+    sig_el = elasticity(strain(model.u), mat.E, mat.nu, mat.model)
+    want_el = projection(sig_el, mesh, model.rule.dx)
+    want = projection(sig_el + model.history.M, mesh, model.rule.dx)
+    assert np.abs(want - want_el).max() > 1.0  # the memory term is not negligible here
+    cs = CellStresses(model, mat)
+    got_el = cs.elastic()
+    got = cs.total(got_el)
+    scale = np.abs(want).max()
+    assert np.allclose(got_el, want_el, rtol=0, atol=1e-13 * scale)
+    assert np.allclose(got, want, rtol=0, atol=1e-13 * scale)
+    fields = Outputs(model, mat, cfg.output, None).names  # no directory: nothing written, nothing built
+    assert fields == ["displacement", "damage", "von_mises", "von_mises_elastic"]
+    assert np.allclose(von_mises_array(got, 2), von_mises_array(want, 2), rtol=1e-13)
+
+
+@pytest.mark.parametrize("u_degree", [1, 2])
+def test_implicit_trapezoid_stress_includes_the_current_level(comm, u_degree):
+    """With memory.rule = "trapezoid" the history keeps the past only; sigma_n = A eps(u_n) + M_n + (k/2) g(0) H_n."""
+    from solver.memory import memory_source
+
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05", "memory.rule='trapezoid'",
+                                                f"discretization.u_degree={u_degree}"])
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(4):
+        stepper.step(n)
+    mesh, mat = model.geo.mesh, cfg.material
+
+    def A(e):
+        return elasticity(e, mat.E, mat.nu, mat.model)
+
+    weight = float(model.history.current_weight.value)
+    assert weight == pytest.approx(0.5 * 0.05 * 1.0)
+    H = memory_source(model.u, model.zeta, A, cfg.memory.L)
+    want = projection(A(strain(model.u)) + model.history.M + weight * H, mesh, model.rule.dx)
+    cs = CellStresses(model, mat)
+    got = cs.total(cs.elastic())
+    assert np.allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())

@@ -1,0 +1,106 @@
+"""The time loop: which levels are written, the order of a step, and failures that know their step."""
+
+import numpy as np
+import pytest
+from conftest import ROOT, solve
+
+from solver.config import from_dict
+from solver.errors import DisplacementSolveError
+from solver.stepper import Stepper, _csv_lines_until, build_model, run, writes_level
+
+SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.3, "k": 0.1}}
+
+
+def test_writes_level():
+    assert [n for n in range(11) if writes_level(n, 10, 3)] == [0, 3, 6, 9, 10]
+    assert [n for n in range(11) if writes_level(n, 10, 0)] == [0, 10]
+    assert all(writes_level(n, 10, 1) for n in range(11))
+
+
+def test_a_step_commits_the_memory_of_the_previous_level_first(comm):
+    """Level 1 uses M_1 = k g(k) H(u_0, zeta_0): the history is formed from level 0 before the damage moves."""
+    model = build_model(from_dict(SCENE), comm)
+    stepper = Stepper(model)
+    row0 = stepper.step(0)
+    assert np.all(model.history.M.x.array == 0.0)  # M_0 = 0: nothing committed at level 0
+    H0 = model.history.H().copy()  # H(u_0, zeta_0)
+    stepper.step(1)
+    assert np.allclose(model.history.M.x.array, 0.1 * 1.0 * H0, rtol=0, atol=1e-14 * np.abs(H0).max())
+    assert row0["step"] == 0 and row0["zeta_min"] == 1.0
+    for key in ("time_memory", "time_damage", "time_displacement", "time_diagnostics"):
+        assert row0[key] >= 0.0
+
+
+def test_run_rows_have_every_timing_and_a_wall_time_that_sums_them(comm):
+    _, rows = solve(from_dict(SCENE), comm)
+    assert [r["step"] for r in rows] == [0, 1, 2, 3]
+    parts = ("time_memory", "time_damage", "time_displacement", "time_diagnostics", "time_output")
+    for r in rows:
+        assert r["wall_time"] == pytest.approx(sum(r[p] for p in parts), rel=1e-12)
+
+
+def test_a_failure_carries_the_step_and_time(comm, monkeypatch):
+    model = build_model(from_dict(SCENE), comm)
+    stepper = Stepper(model)
+    stepper.step(0)
+
+    def fail(t):
+        raise DisplacementSolveError("SNES", "DIVERGED_MAX_IT", 3, [1.0], 1e-10)
+
+    monkeypatch.setattr(model.mech, "solve", fail)
+    with pytest.raises(DisplacementSolveError) as err:
+        stepper.step(2)
+    assert (err.value.step, err.value.t) == (2, pytest.approx(0.2))
+
+
+def test_csv_lines_until_keeps_complete_rows_up_to_a_step(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("step,t\n0,0.0\n1,0.1\n2,0.2\n3,0.")  # the last row was cut by a kill
+    assert _csv_lines_until(path, 1) == ["0,0.0\n", "1,0.1\n"]
+    assert _csv_lines_until(path, 9) == ["0,0.0\n", "1,0.1\n", "2,0.2\n"]
+    assert _csv_lines_until(tmp_path / "none.csv", 3) == []
+
+
+def _paper_norm_errors(comm, order: int, ks, k_ref: float) -> list[float]:
+    """max over levels of ||eps(u - u_ref)|| + ||zeta - zeta_ref|| on Example 1 at n = 8 (the same mesh: time error only)."""
+    import dolfinx.fem.petsc  # noqa: F401
+    import ufl
+    from dolfinx import fem
+    from mpi4py import MPI
+
+    from solver.config import load
+
+    def levels(k):
+        cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=8", "mesh.ny=8", f"time.order={order}", f"time.k={k}"])
+        model = build_model(cfg, comm)
+        out = {}
+        run(model, on_step=lambda r: out.__setitem__(round(r["t"], 9), (model.u.x.array.copy(),
+                                                                        model.damage.zeta.x.array.copy())))
+        return model, out
+
+    model, ref = levels(k_ref)
+    V, Z = model.u.function_space, model.damage.V
+    err_u = fem.Function(V)
+    err_z = fem.Function(Z)
+    e = ufl.sym(ufl.grad(err_u))
+    forms = fem.form(ufl.inner(e, e) * ufl.dx), fem.form(err_z * err_z * ufl.dx)
+    out = []
+    for k in ks:
+        _, sol = levels(k)
+        worst = 0.0
+        for t, (u, z) in sol.items():
+            err_u.x.array[:] = u - ref[t][0]
+            err_z.x.array[:] = z - ref[t][1]
+            a, b = (np.sqrt(comm.allreduce(fem.assemble_scalar(f), op=MPI.SUM)) for f in forms)
+            worst = max(worst, a + b)
+        out.append(worst)
+    return out
+
+
+@pytest.mark.parametrize("order,low,high", [(1, 0.9, 1.3), (2, 1.8, 2.2)])
+def test_observed_order_in_k(comm, order, low, high):
+    """Against the same scheme at k/64 on the same mesh: order 1 stays first order, order 2 is second order."""
+    ks = [0.1, 0.05, 0.025]
+    errs = _paper_norm_errors(comm, order, ks, 0.1 / 64)
+    rates = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
+    assert all(low <= r <= high for r in rates), (errs, rates)

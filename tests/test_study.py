@@ -1,0 +1,22 @@
+"""The pure parts of the study command: the Pareto front and the status of a run."""
+
+import math
+
+from solver.errors import DamageSolveError, DisplacementSolveError
+from solver.study import _status, pareto
+
+
+def test_pareto_keeps_the_points_no_other_beats_in_both():
+    pts = [(1.0, 5.0), (2.0, 3.0), (2.5, 4.0), (3.0, 1.0), (0.5, 9.0), (3.0, 1.0)]
+    front = pareto(pts)
+    assert sorted(front) == [0, 1, 3, 4]
+    assert pareto([]) == []
+    assert pareto([(1.0, math.inf)]) == []  # an infinite error is never on the front
+
+
+def test_status_of_a_run_comes_from_the_failure_type_and_fields():
+    assert _status(None) == ("converged", "")
+    err = DisplacementSolveError("penalty_duality", "DIVERGED_STAGNATION", 21, [1.0], 1e-9).at(3, 0.3)
+    status, reason = _status(err)
+    assert status == "stagnated" and reason.startswith("step 3, t = 0.3")
+    assert _status(DamageSolveError("SEMI_IMPLICIT_UNSTABLE").at(2, 0.2))[0] == "damage_failed"

@@ -1,0 +1,346 @@
+"""The XDMF time-series writer (solver/xdmf.py): read back with meshio and h5py, every byte of its XML
+valid, killed inside each kind of write, restarted, and the same files from one process and from two."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, mpi_env
+from mpi4py import MPI
+
+import solver.xdmf as sx
+from solver.xdmf import FieldSpec, SeriesError, XDMFSeries, read_series
+
+FIELDS = [FieldSpec("displacement", "Node", "Vector"), FieldSpec("damage", "Node", "Scalar"),
+          FieldSpec("stress", "Cell", "Tensor6"), FieldSpec("von_mises", "Cell", "Scalar")]
+
+
+def exact(t: float, points: np.ndarray, cells: np.ndarray) -> dict[str, np.ndarray]:
+    """The values the scene below writes at time t, computed from the file's own points and cells."""
+    x, y = points[:, 0], points[:, 1]
+    mid = points[cells].mean(axis=1)
+    cx, cy = mid[:, 0], mid[:, 1]
+    zero = np.zeros_like(cx)
+    return {
+        "displacement": np.stack([x * t, y + t, np.zeros_like(x)], axis=1),
+        "damage": 1.0 - x * y * t,
+        "stress": np.stack([cx + t, 2 * cy + t, zero, cx * cy - t, zero, zero], axis=1),  # XX YY ZZ XY YZ XZ
+        "von_mises": cx + 10 * cy + t,
+    }
+
+
+class Scene:
+    """A unit square with one field of each kind, set to known functions of (x, t)."""
+
+    def __init__(self, comm: MPI.Comm, n: int = 6) -> None:
+        from dolfinx import fem, mesh
+
+        self.mesh = mesh.create_unit_square(comm, n, n)
+        self.u = fem.Function(fem.VectorFunctionSpace(self.mesh, ("CG", 1)))
+        self.z = fem.Function(fem.FunctionSpace(self.mesh, ("CG", 1)))
+        self.s = fem.Function(fem.TensorFunctionSpace(self.mesh, ("DG", 0)))
+        self.v = fem.Function(fem.FunctionSpace(self.mesh, ("DG", 0)))
+        self.layout = sx.dolfinx_layout(self.mesh)
+        self.rows = sx.DolfinxRows(self.mesh)
+
+    def values(self, t: float) -> dict[str, np.ndarray]:
+        self.u.interpolate(lambda x: np.stack([x[0] * t, x[1] + t]))
+        self.z.interpolate(lambda x: 1.0 - x[0] * x[1] * t)
+        self.s.interpolate(lambda x: np.stack([x[0] + t, x[0] * x[1] - t, x[0] * x[1] - t, 2 * x[1] + t]))
+        self.v.interpolate(lambda x: x[0] + 10 * x[1] + t)
+        r = self.rows
+        return {"displacement": sx.vector3(r.rows(self.u)), "damage": r.rows(self.z),
+                "stress": sx.tensor6(r.rows(self.s), 2), "von_mises": r.rows(self.v)}
+
+    def series(self, directory: Path, **kw) -> XDMFSeries:
+        return XDMFSeries(directory, self.layout, FIELDS, **kw)
+
+
+def check_values(res: dict, times: list[float], atol: float = 1e-13, rtol: float = 0.0) -> None:
+    """Times as given; every field at every time equal to :func:`exact` (rtol: the rounding of the file's precision)."""
+    assert res["times"] == pytest.approx(times, abs=1e-15) and len(res["times"]) == len(times)
+    for i, t in enumerate(res["times"]):
+        want = exact(t, res["points"], res["cells"])
+        for name, values in res["fields"].items():
+            assert np.allclose(values[i].reshape(want[name].shape), want[name], rtol=rtol, atol=atol), (name, t)
+
+
+def meshio_read(path: Path) -> dict:
+    """The series as meshio's TimeSeriesReader sees it, in read_series' shape."""
+    import meshio
+
+    out: dict = {"times": [], "fields": {}}
+    with meshio.xdmf.TimeSeriesReader(str(path)) as reader:
+        out["points"], cells = reader.read_points_cells()
+        out["cells"] = cells[0].data
+        for k in range(reader.num_steps):
+            t, pd, cd = reader.read_data(k)
+            out["times"].append(t)
+            for name, v in [*pd.items(), *((n, c[0]) for n, c in cd.items())]:
+                out["fields"].setdefault(name, []).append(v)
+    return out
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_series_reads_back_in_meshio(comm, shared_tmp, precision):
+    """Serial and on 2 ranks: every time, every field, every value; NumberType and Precision on every DataItem."""
+    scene = Scene(comm)
+    times = [0.0, 0.25, 0.5, 0.75, 1.0]
+    w = scene.series(shared_tmp, precision=precision, expected_levels=len(times))
+    for t in times:
+        w.write(t, scene.values(t))
+    w.close()
+    if comm.rank == 0:
+        res = meshio_read(shared_tmp / "solution.xdmf")
+        assert res["points"].shape == (49, 2) and res["cells"].shape == (72, 3)
+        dtype = np.float64 if precision == "double" else np.float32
+        assert all(v.dtype == dtype for vs in res["fields"].values() for v in vs)
+        check_values(res, times, rtol=0.0 if precision == "double" else 2.0**-24)  # single: rounded to float32
+        items = list(ET.parse(shared_tmp / "solution.xdmf").getroot().iter("DataItem"))
+        assert len(items) == len(times) * (2 + len(FIELDS))
+        import h5py
+
+        for item in items:
+            name, dataset = item.text.strip().split(":")
+            with h5py.File(shared_tmp / name, "r") as h5:
+                dt = h5[dataset].dtype
+            assert (item.get("NumberType"), item.get("Precision")) == ({"f": "Float", "i": "Int"}[dt.kind], str(dt.itemsize))
+        # no second XDMF file, nothing left from the writer's temporaries
+        assert sorted(p.name for p in shared_tmp.rglob("*") if p.is_file() and p.suffix != ".h5") == ["solution.xdmf"]
+
+
+def test_tensor6_order_in_3d(comm, shared_tmp):
+    from dolfinx import fem, mesh
+
+    m = mesh.create_unit_cube(comm, 2, 2, 2)
+    s = fem.Function(fem.TensorFunctionSpace(m, ("DG", 0)))
+    full = np.array([[1.0, 4.0, 6.0], [4.0, 2.0, 5.0], [6.0, 5.0, 3.0]])
+    s.interpolate(lambda x: np.tile(full.reshape(9, 1), (1, x.shape[1])))
+    rows = sx.DolfinxRows(m)
+    w = XDMFSeries(shared_tmp, sx.dolfinx_layout(m), [FieldSpec("stress", "Cell", "Tensor6")], expected_levels=1)
+    w.write(0.0, {"stress": sx.tensor6(rows.rows(s), 3)})
+    w.close()
+    if comm.rank == 0:
+        res = read_series(shared_tmp / "solution.xdmf")
+        assert res["points"].shape == (27, 3) and res["cells"].shape == (48, 4)
+        assert np.array_equal(res["fields"]["stress"][0], np.tile([1.0, 2.0, 3.0, 4.0, 5.0, 6.0], (48, 1)))  # XX YY ZZ XY YZ XZ
+
+
+@pytest.mark.serial
+def test_every_byte_state_of_the_xml_is_valid(tmp_path):
+    """Between any two bytes of an append, solution.xdmf parses and lists exactly the complete levels."""
+    scene = Scene(MPI.COMM_SELF, n=2)
+    w = scene.series(tmp_path, expected_levels=4)
+    path = tmp_path / "solution.xdmf"
+    w.write(0.0, scene.values(0.0))
+    checked = 0
+    for k, t in enumerate([0.5, 1.0, 1.5], start=1):
+        before, cursor, flip = path.read_bytes(), w.cursor, w.flip
+        w.write(t, scene.values(t))
+        after = path.read_bytes()
+        unit = after[cursor: w.cursor]
+        assert len(after) == len(before) and after[flip:flip + 1] == b"<" and before[flip:flip + 1] == b" "
+        assert after == before[:flip] + b"<" + before[flip + 1: cursor] + unit + before[w.cursor:]
+        for j in range(len(unit) + 1):  # the unit written up to byte j, not yet made live
+            state = before[:cursor] + unit[:j] + before[cursor + j:]
+            grids = ET.fromstring(state).find("Domain/Grid").findall("Grid")
+            assert len(grids) == k, j
+            checked += 1
+        grids = ET.fromstring(after).find("Domain/Grid").findall("Grid")
+        assert [float(g.find("Time").get("Value")) for g in grids] == [0.0, 0.5, 1.0, 1.5][: k + 1]
+    assert checked > 3000
+    check_values(meshio_read(path), [0.0, 0.5, 1.0, 1.5])  # the padded (not yet closed) file
+    w.close()
+    assert b"<?pad" not in path.read_bytes() and b"!--" not in path.read_bytes()
+    check_values(meshio_read(path), [0.0, 0.5, 1.0, 1.5])
+
+
+@pytest.mark.serial
+def test_padding_and_chunks_grow_without_a_known_length(tmp_path, monkeypatch):
+    """No expected length: the padding is renewed by rename when it runs out, chunks keep their size."""
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 7)
+    scene = Scene(MPI.COMM_SELF, n=2)
+    w = scene.series(tmp_path)
+    times = [0.1 * i for i in range(30)]
+    inodes = set()
+    for t in times:
+        w.write(t, scene.values(t))
+        inodes.add((tmp_path / "solution.xdmf").stat().st_ino)
+    assert 2 <= len(inodes) <= 6  # renewed a few times (geometric growth), not at every level
+    check_values(read_series(tmp_path / "solution.xdmf"), times)
+    w.close()
+    check_values(meshio_read(tmp_path / "solution.xdmf"), times)
+    assert sorted(p.name for p in (tmp_path / "fields").iterdir()) == [
+        "levels_000000.h5", "levels_000007.h5", "levels_000014.h5", "levels_000021.h5", "levels_000028.h5", "mesh.h5"]
+
+
+def _crash(w: XDMFSeries) -> None:
+    """Drop a writer as a killed process would: files left as they are, nothing tidied."""
+    for fd in (w.fd, w.chunk.fd if w.chunk else None):
+        if fd is not None:
+            os.close(fd)
+    w.closed = True
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_restart_keeps_levels_up_to_t_and_continues(comm, shared_tmp, monkeypatch, closed):
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
+    scene = Scene(comm)
+    first = [0.1 * i for i in range(8)]
+    w = scene.series(shared_tmp, expected_levels=len(first))
+    for t in first:
+        w.write(t, scene.values(t + 100.0))  # the first run's values: t + 100
+    w.close() if closed else _crash(w)
+    w = scene.series(shared_tmp, expected_levels=6, keep_until=0.30000000000000004)
+    assert w.times == pytest.approx(first[:4]) if comm.rank == 0 else w.times == []
+    second = [0.1 * i for i in range(4, 10)]
+    for t in second:
+        w.write(t, scene.values(t))
+    w.close()
+    if comm.rank == 0:
+        res = read_series(shared_tmp / "solution.xdmf")
+        assert res["times"] == pytest.approx(first[:4] + second) and len(res["times"]) == 10
+        kept = {k: vs[:4] for k, vs in res["fields"].items()}
+        check_values(dict(res, times=[t + 100.0 for t in res["times"][:4]], fields=kept),
+                     [t + 100.0 for t in first[:4]], atol=1e-11)  # the kept levels hold the first run's values
+        check_values(dict(res, times=res["times"][4:], fields={k: vs[4:] for k, vs in res["fields"].items()}), second)
+        seen = meshio_read(shared_tmp / "solution.xdmf")
+        assert seen["times"] == res["times"]
+        assert all(np.array_equal(x, y) for k in res["fields"] for x, y in zip(seen["fields"][k], res["fields"][k]))
+        referenced = {i.text.split(":")[0] for i in ET.parse(shared_tmp / "solution.xdmf").getroot().iter("DataItem")}
+        on_disk = {f"fields/{p.name}" for p in (shared_tmp / "fields").iterdir()}
+        assert on_disk == referenced  # no chunk left that no level refers to
+
+
+def test_restart_refuses_another_mesh(comm, shared_tmp):
+    a = Scene(comm, n=6)
+    w = a.series(shared_tmp, expected_levels=1)
+    w.write(0.0, a.values(0.0))
+    w.close()
+    b = Scene(comm, n=5)
+    with pytest.raises(SeriesError, match="holds another mesh"):
+        b.series(shared_tmp, keep_until=0.0)
+
+
+def test_bad_arguments(comm, tmp_path):
+    scene = Scene(MPI.COMM_SELF, n=2)
+    with pytest.raises(ValueError, match="precision 'half'"):
+        scene.series(tmp_path, precision="half")
+    with pytest.raises(ValueError, match="no name twice"):
+        XDMFSeries(tmp_path, scene.layout, [FIELDS[0], FIELDS[0]])
+    with pytest.raises(ValueError, match="kind 'Tensor'"):
+        FieldSpec("stress", "Cell", "Tensor")
+    with pytest.raises(ValueError, match="letters, digits"):
+        FieldSpec("von mises", "Cell", "Scalar")
+
+
+def _example2_mesh(comm: MPI.Comm):
+    """Example 2's gmsh mesh, read on rank 0 and distributed (as solver/geometry.py does)."""
+    import gmsh
+    from dolfinx.io import gmshio
+
+    if comm.rank == 0:
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.merge(str(ROOT / "meshes" / "example2.msh"))
+    try:
+        return gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=2)[0]
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size == 1, reason="compares a 2-rank writer with a one-process one")
+def test_one_process_and_two_ranks_write_the_same_files(comm, shared_tmp):
+    """The same rows in the same order: mesh and values identical, the XML byte for byte."""
+    cases = {"square": lambda c: Scene(c, n=7).mesh, "gmsh": _example2_mesh}
+    for name, make in cases.items():
+        for tag, c in (("par", comm), ("ser", MPI.COMM_SELF if comm.rank == 0 else None)):
+            if c is None:
+                continue
+            lay = sx.dolfinx_layout(make(c))
+            # values made from what each rank owns (not through dolfinx's interpolation, whose evaluation
+            # points differ in the last bit between partitions)
+            x, y = lay.points[:, 0], lay.points[:, 1]
+            u = sx.vector3(np.stack([3 * x * y, x - y * y], axis=1))
+            g = 0.5 * lay.cell_keys + 1.0
+            w = XDMFSeries(shared_tmp / name / tag, lay, [FieldSpec("u", "Node", "Vector"), FieldSpec("g", "Cell", "Scalar")],
+                           expected_levels=2)
+            for t in (0.0, 1.0):
+                w.write(t, {"u": u * (1 + t), "g": g + t})
+            w.close()
+        comm.barrier()
+        problems = []
+        if comm.rank == 0:
+            a, b = shared_tmp / name / "ser", shared_tmp / name / "par"
+            if (a / "solution.xdmf").read_bytes() != (b / "solution.xdmf").read_bytes():
+                problems.append("xml")
+            ra, rb = read_series(a / "solution.xdmf"), read_series(b / "solution.xdmf")
+            problems += [k for k in ("points", "cells") if not np.array_equal(ra[k], rb[k])]
+            problems += [f"{key}: {np.abs(x - y).max():.1e}" for key in ra["fields"]
+                         for x, y in zip(ra["fields"][key], rb["fields"][key]) if not np.array_equal(x, y)]
+        assert comm.bcast(problems, root=0) == [], name  # on every rank: a failure must not leave one rank waiting
+
+
+# ---------------------------------------------------------------------------- killed inside a write
+
+KILLED = """
+import sys
+import numpy as np
+from mpi4py import MPI
+sys.path.insert(0, {tests!r})
+import solver.xdmf as sx
+from test_xdmf import Scene
+sx.MAX_LEVELS_PER_CHUNK = 4
+out, keep = sys.argv[1], (float(sys.argv[2]) if len(sys.argv) > 2 else None)
+times = [0.1 * i for i in range(12)]
+if keep is not None:
+    times = [t for t in times if t > keep + 1e-12]
+scene = Scene(MPI.COMM_WORLD)
+w = scene.series(out, expected_levels=len(times), keep_until=keep)
+for t in times:
+    w.write(t, scene.values(t))
+w.close()
+"""
+
+
+def _run(script: Path, args: list[str], nproc: int, env: dict) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, str(script), *args]
+    if nproc > 1:
+        cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
+    return subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("stage,at,listed,nproc", [
+    ("data", 6, 5, 1),  # inside the 6th level's data: levels 0-4 listed
+    ("xml", 5, 5, 1),  # inside the grid of level 5 (the 5th appended after the first)
+    ("flip", 7, 7, 1),  # grid of level 7 written, not made live
+    ("chunk", 2, 4, 1),  # inside the creation of the second chunk (levels 4-7)
+    ("data", 9, 8, 2),  # 2 ranks, rank 0 killed inside a data write
+])
+def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc):
+    script = tmp_path / "killed.py"
+    script.write_text(KILLED.format(tests=str(ROOT / "tests")))
+    out = tmp_path / "out"
+    env = dict(mpi_env(), PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    res = _run(script, [str(out)], nproc, dict(env, SOLVER_TEST_KILL=f"{stage}:{at}"))
+    if nproc == 1:
+        assert res.returncode == -signal.SIGKILL, res.stderr[-2000:]
+    else:
+        assert res.returncode != 0 and "signal 9" in res.stdout + res.stderr, res.stdout[-2000:] + res.stderr[-2000:]
+    xdmf = out / "solution.xdmf"
+    times = [0.1 * i for i in range(listed)]
+    check_values(read_series(xdmf), times)  # only complete levels, each with its right values
+    check_values(meshio_read(xdmf), times)
+    res = _run(script, [str(out), repr(times[-1])], nproc, env)
+    assert res.returncode == 0, res.stderr[-2000:]
+    check_values(read_series(xdmf), [0.1 * i for i in range(12)])
+    check_values(meshio_read(xdmf), [0.1 * i for i in range(12)])
