@@ -123,14 +123,25 @@ def _progress(comm: MPI.Comm, steps: int, enabled: bool):
 
 
 def cmd_check(args, comm: MPI.Comm) -> int:
+    from dolfinx import fem
+
     from .geometry import build
+    from .operators import Dirichlet, check_rigid_motions
 
     cfg = load(args.config, args.overrides)
-    # building the geometry also checks boundary names and intervals against the mesh
-    build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    # building the geometry also checks boundary names and intervals against the mesh,
+    # and the Dirichlet parts against the rigid motions
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    V = fem.VectorFunctionSpace(geo.mesh, ("CG", 1))
+    check_rigid_motions(geo, V, Dirichlet(geo, V, cfg.boundaries))
     physics = ["elasticity"]
+    if cfg.body_force.f:
+        physics.append("body force")
+    moving = [p.name for p in cfg.dirichlet if p.role == "displacement"]
+    if moving:
+        physics.append("displacement(" + ",".join(moving) + ")")
     if cfg.contact:
-        physics.append("contact(" + ",".join(p.name for p in cfg.contact) + ")")
+        physics.append("contact(" + ",".join(f"{p.name}:{p.law}" for p in cfg.contact) + ")")
     if cfg.memory.kernel != "none":
         physics.append(f"memory({cfg.memory.kernel})")
     if cfg.damage.enabled:

@@ -1,7 +1,10 @@
-"""Frictionless normal compliance on the contact parts (docs/model.md §1, §3.3): -sigma_nu = p(u_nu - g), p(r) = r_+ / mu.
+"""Frictionless normal compliance on the contact parts (docs/model.md §1, §3.3): -sigma_nu = p(u_nu - g).
 
-UFL differentiates ``max_value`` to the Heaviside H(u_nu - g) / mu, which is the
-semismooth Newton's generalized derivative.
+The law p of each part (``law``): linear p(r) = r_+ / mu (the paper's), power p(r) = c r_+^m,
+or limited penetration p(r) = r_+ / mu + (r - d)_+ / mu_stiff. UFL differentiates
+``max_value`` to the Heaviside, which is the semismooth Newton's generalized derivative
+(H(u_nu - g) / mu for the linear law). The gap is a number or piecewise linear in one
+coordinate, the same function here (UFL) and at the points (:func:`gap_values`).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .config import BoundaryConfig
+from .config.boundary import AXES
 from .geometry import Geometry
 from .operators import assemble_without_diagonal
 
@@ -23,9 +27,43 @@ def normal_compliance(r, mu: float):
     return ufl.max_value(r, 0.0) / mu
 
 
-def penetration(u, n, gap: float):
+def compliance(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Expr:
+    """p(r) of the part's law (linear: exactly :func:`normal_compliance`)."""
+    if part.law == "linear":
+        return normal_compliance(r, part.mu)
+    if part.law == "power":
+        return part.coefficient * ufl.max_value(r, 0.0) ** part.exponent
+    return normal_compliance(r, part.mu) + ufl.max_value(r - part.depth, 0.0) / part.mu_stiff
+
+
+def penetration(u, n, gap):
     """u_nu - g (> 0 is interpenetration)."""
     return ufl.dot(u, n) - gap
+
+
+def gap_function(part: BoundaryConfig, mesh) -> float | ufl.core.expr.Expr:
+    """The part's gap: its number, or its table [s, g] as g_0 + sum of ramps clamped to [s_i, s_{i+1}]
+    (piecewise linear, constant beyond the table) in the coordinate ``gap_coordinate``."""
+    if not part.gap_table:
+        return part.gap
+    s = ufl.SpatialCoordinate(mesh)[AXES.index(part.gap_coordinate)]
+    rows = part.gap_table
+    g = rows[0][1]
+    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
+        g = g + (g1 - g0) / (s1 - s0) * (ufl.min_value(ufl.max_value(s, s0), s1) - s0)
+    return g
+
+
+def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
+    """:func:`gap_function` at points x (n, gdim): the same ramps in numpy."""
+    if not part.gap_table:
+        return np.full(len(x), part.gap)
+    s = x[:, AXES.index(part.gap_coordinate)]
+    rows = part.gap_table
+    g = np.full(len(x), rows[0][1])
+    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
+        g = g + (g1 - g0) / (s1 - s0) * (np.minimum(np.maximum(s, s0), s1) - s0)
+    return g
 
 
 def _ds(geo: Geometry, part: BoundaryConfig, degree: int):
@@ -36,29 +74,31 @@ def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int
     """j(u, w) = sum over contact parts of int p(u_nu - g) w_nu ds."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        normal_compliance(penetration(u, n, p.gap), p.mu) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
+        compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
     )
 
 
 def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
     """Total normal contact force int p(u_nu - g) ds (a functional)."""
     n = ufl.FacetNormal(geo.mesh)
-    return sum(normal_compliance(penetration(u, n, p.gap), p.mu) * _ds(geo, p, degree) for p in parts)
+    return sum(compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * _ds(geo, p, degree) for p in parts)
 
 
 def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
     """Length (area) of the contact zone where u_nu - g > 0, at the facet quadrature points."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        ufl.conditional(ufl.gt(penetration(u, n, p.gap), 0.0), 1.0, 0.0) * _ds(geo, p, degree) for p in parts
+        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo.mesh)), 0.0), 1.0, 0.0) * _ds(geo, p, degree)
+        for p in parts
     )
 
 
 class ContactTerm:
     """j(u, w) as a residual term and its Jacobian C, with C's active set tracked between calls.
 
-    The problem is piecewise linear, so C changes only when the active set does. A fingerprint
-    C r (r a fixed random vector) tells whether it did: a missed change could cost Newton
+    With the linear and limited-penetration laws the problem is piecewise linear, so C changes
+    only when the active set does; with the power law it changes with u. A fingerprint C r
+    (r a fixed random vector) tells whether C changed: a missed change could cost Newton
     iterations, never accuracy (the residual decides convergence).
     """
 

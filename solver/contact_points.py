@@ -10,11 +10,23 @@ import numpy as np
 from mpi4py import MPI
 
 from .config import BoundaryConfig
+from .contact import gap_values
 from .geometry import Geometry
+
+
+def _law_row(part: BoundaryConfig) -> tuple[float, float, float, float, float]:
+    """(1/mu, depth, 1/mu_stiff, c, m) of a part's law; see :meth:`ContactPoints.pressure`."""
+    if part.law == "power":
+        return 0.0, np.inf, 0.0, part.coefficient, part.exponent
+    if part.law == "limited_penetration":
+        return 1.0 / part.mu, part.depth, 1.0 / part.mu_stiff, 0.0, 1.0
+    return 1.0 / part.mu, np.inf, 0.0, 0.0, 1.0
 
 
 class ContactPoints:
     """The contact term at its quadrature points: u_nu - g = N u - g and j(u) = N^T W p(N u - g).
+
+    The gap g and the law p are evaluated per point as the UFL term does (same ramps, same laws).
 
     N (sparse, local dofs incl. ghosts -> points of the facets this rank integrates) and the
     weights W reproduce the ``ds`` rule of :func:`residual` exactly, so every method works on
@@ -42,9 +54,10 @@ class ContactPoints:
         # P2 and above: the cell's basis at the points (basix orders vertex dofs first, as the cell's vertices)
         element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree_u,
                                        basix.LagrangeVariant.gll_warped) if degree_u > 1 else None
-        rows, cols, vals, weights, gaps, inv_mu = [], [], [], [], [], []
+        rows, cols, vals, weights, gaps, coords, law = [], [], [], [], [], [], []
         npts = 0
         for part in parts:
+            first = npts
             for f in geo.facets(part.name):
                 c = f2c.links(f)[0]
                 if c >= ncells:  # integrated by the rank that owns the cell
@@ -75,20 +88,39 @@ class ContactPoints:
                             cols.append(dof * bs + comp)
                             vals.append(value * n[comp])
                     weights.append(w * length)
-                    gaps.append(part.gap)
-                    inv_mu.append(1.0 / part.mu)
+                    coords.append((1.0 - s[q]) * x[da] + s[q] * x[db])
                     npts += 1
+            xq = np.array(coords[first:]).reshape(-1, 3)
+            gaps.append(gap_values(part, xq))
+            law.append(np.array([_law_row(part)] * (npts - first)).reshape(-1, 5))
         size = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
         self.N = sp.csr_matrix((vals, (rows, cols)), shape=(npts, size))
         self.NT = self.N.T.tocsr()
         self.W = np.asarray(weights)
-        self.g = np.asarray(gaps)
-        self.inv_mu = np.asarray(inv_mu)
+        self.x = np.array(coords).reshape(-1, 3)  # the points (for tests and pictures)
+        self.g = np.concatenate(gaps) if gaps else np.zeros(0)
+        law_rows = np.concatenate(law) if law else np.zeros((0, 5))
+        # per point: 1/mu (linear and limited penetration; 0 for power), depth d and 1/mu_stiff
+        # (limited penetration; d = inf otherwise), c and m (power; c = 0 otherwise)
+        self.inv_mu, self.depth, self.inv_mu_stiff, self.coefficient, self.exponent = law_rows.T.copy()
+        self.limited = np.isfinite(self.depth)
+        self.power = self.coefficient > 0
         self.comm = geo.comm
 
     def penetration(self, u_local) -> np.ndarray:
         """u_nu - g at the local points."""
         return self.N @ u_local - self.g
+
+    def pressure(self, r: np.ndarray) -> np.ndarray:
+        """p(r) at the points, each with its part's law (the linear law: r_+ / mu, as in the UFL term)."""
+        p = np.maximum(r, 0.0) * self.inv_mu
+        if self.limited.any():
+            m = self.limited
+            p[m] += np.maximum(r[m] - self.depth[m], 0.0) * self.inv_mu_stiff[m]
+        if self.power.any():
+            m = self.power
+            p[m] = self.coefficient[m] * np.maximum(r[m], 0.0) ** self.exponent[m]
+        return p
 
     def max_penetration(self, u_local) -> float:
         r = self.penetration(u_local)

@@ -1,4 +1,4 @@
-"""Per-level diagnostics of the displacement: contact force and zone, penetration, ||eps(u)||.
+"""Per-level diagnostics of the displacement: contact force and zone, penetration, ||eps(u)||, reactions.
 
 Functionals of the contact term are integrated with the same facet rule as the term
 itself; ||eps(u)||_L2 = sqrt(u . G u) with the strain Gram matrix G assembled once.
@@ -11,20 +11,69 @@ import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from . import contact
 from .config import BoundaryConfig
 from .contact_points import ContactPoints
+from .displacement import DisplacementProblem
 from .geometry import Geometry
 from .material import strain
+
+
+class Reactions:
+    """The force each Dirichlet part exerts on the body to hold it, per prescribed component.
+
+    R = K_full u + j(u) + B M_n (+ the trapezoid's implicit memory term) - (f_n, w): the residual
+    with no Dirichlet row replaced, so on a Dirichlet dof it is the force the support must add
+    for equilibrium. Summed over the dofs the part carries (:class:`operators.Dirichlet`); K_full
+    is kept as its Dirichlet rows only, so the product costs their entries alone.
+    """
+
+    def __init__(self, problem: DisplacementProblem) -> None:
+        self.problem = problem
+        self.comm = problem.u.function_space.mesh.comm
+        ops = problem.ops
+        self.dirichlet = ops.dirichlet
+        self.columns = self.dirichlet.columns
+        K = fpetsc.assemble_matrix(ops.bulk_form)  # no Dirichlet rows or columns removed
+        K.assemble()
+        # only the Dirichlet rows of K u are needed: keep those (local row j is the owned dof constrained[j])
+        start, end = K.getOwnershipRange()
+        constrained = self.dirichlet.constrained
+        rows = PETSc.IS().createGeneral((constrained + start).astype(PETSc.IntType), comm=self.comm)
+        cols = PETSc.IS().createStride(end - start, start, 1, comm=self.comm)
+        self.K = K.createSubMatrix(rows, cols)
+        K.destroy()
+        self.Ku = self.K.createVecLeft()
+        self.position = {key: np.searchsorted(constrained, dofs) for key, dofs in self.dirichlet.dofs.items()}
+        self.R = ops.b.duplicate()
+        self.contact_form = problem.contact.residual_form if problem.contact is not None else None
+
+    def row(self) -> dict[str, float]:
+        ops, R = self.problem.ops, self.R
+        with R.localForm() as r:
+            r.set(0.0)
+        for form in (self.contact_form, self.problem.Fm):
+            if form is not None:
+                fpetsc.assemble_vector(R, form)
+        R.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if ops.memory_force is not None:
+            R.axpy(1.0, ops.memory_force)
+        R.axpy(-1.0, ops.loads)
+        self.K.mult(self.problem.u.vector, self.Ku)
+        values, Ku = R.array_r, self.Ku.array_r
+        local = np.array([values[dofs].sum() + Ku[self.position[key]].sum() for key, dofs in self.dirichlet.dofs.items()])
+        total = self.comm.allreduce(local, op=MPI.SUM) if len(local) else local
+        return dict(zip(self.dirichlet.dofs, (float(v) for v in total)))
 
 
 class DisplacementDiagnostics:
     """What the time series reports about u at each level (all values the same on every rank)."""
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
-                 points: ContactPoints | None) -> None:
-        self.geo, self.u, self.points = geo, u, points
+                 points: ContactPoints | None, reactions: Reactions | None = None) -> None:
+        self.geo, self.u, self.points, self.reactions = geo, u, points, reactions
         self.has_contact = bool(parts)
         self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
         self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
@@ -56,9 +105,17 @@ class DisplacementDiagnostics:
         self.gram.mult(self.u.vector, self._work)
         return float(np.sqrt(max(self._work.dot(self.u.vector), 0.0)))
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The reaction columns (the fixed ones are io.CSV_COLUMNS)."""
+        return self.reactions.columns if self.reactions is not None else ()
+
     def row(self) -> dict[str, float]:
-        return {"contact_force": self.contact_force(), "contact_length": self.contact_length(),
-                "max_penetration": self.max_penetration(), "strain_norm": self.strain_norm()}
+        out = {"contact_force": self.contact_force(), "contact_length": self.contact_length(),
+               "max_penetration": self.max_penetration(), "strain_norm": self.strain_norm()}
+        if self.reactions is not None:
+            out.update(self.reactions.row())
+        return out
 
 
 class DamageDiagnostics:

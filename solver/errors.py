@@ -136,3 +136,14 @@ class OutputError(SolveFailure):
     def __init__(self, reason: str, level_t: float | None = None) -> None:
         self.reason, self.level_t = reason, level_t
         super().__init__(f"writing results failed: {reason}")
+
+
+class RigidMotionError(SolveFailure):
+    """The Dirichlet parts leave a rigid motion free, so the stiffness matrix is singular (found before solving)."""
+
+    status = "singular"
+
+    def __init__(self, motions: list[str]) -> None:
+        self.motions = list(motions)
+        super().__init__("the Dirichlet parts leave a rigid motion free (" + "; ".join(self.motions) + "): "
+                         "the stiffness matrix is singular; fix more displacement components")

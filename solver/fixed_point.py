@@ -1,9 +1,10 @@
 """Contact methods that iterate on the contact forces with one matrix factored once (docs/model.md §4).
 
-- :class:`FixedPointSolver`: K u+ = b - N^T W p(N u - g), the plain fixed point.
+- :class:`FixedPointSolver`: K u+ = b - N^T W p(N u - g), the plain fixed point (any law).
 - :class:`PenaltyDualitySolver`: Bermudez-Moreno. With omega = value/mu per point,
   (K + omega N^T W N) u+ = b + N^T W (omega g - q), and q+ the Yosida approximation of
-  G - omega I at (r + lambda q), lambda = 1/(2 omega).
+  G - omega I at (r + lambda q), lambda = 1/(2 omega). Laws: linear and limited penetration
+  (omega from the layer's mu); not power (refused by the scene check: p' is unbounded).
 
 Both work on the contact term at its quadrature points (:class:`contact_points.ContactPoints`),
 which is the UFL term exactly, and only the residual decides: a small step proves nothing
@@ -110,7 +111,7 @@ class FixedPointSolver(ContactIteration):
         return self.problem.ops.K
 
     def point_forces(self, r: np.ndarray) -> np.ndarray:
-        return np.maximum(r, 0.0) * self.points.inv_mu
+        return self.points.pressure(r)
 
 
 class PenaltyDualitySolver(ContactIteration):
@@ -140,14 +141,27 @@ class PenaltyDualitySolver(ContactIteration):
         return A
 
     def start(self, r: np.ndarray) -> None:
-        self.q = np.maximum(r, 0.0) * self.points.inv_mu - self.omega * r  # (G - omega I)(r) at the start
+        self.q = self.points.pressure(r) - self.omega * r  # (G - omega I)(r) at the start
 
     def point_forces(self, r: np.ndarray) -> np.ndarray:
         return self.q - self.omega * self.points.g
 
     def after_solve(self) -> None:
-        """q+ = Yosida approximation of G - omega I at (r + lambda q), with lambda omega = 1/2."""
-        lam, omega, inv_mu = self.lam, self.omega, self.points.inv_mu
-        y = self.points.penetration(self.problem.u.x.array) + lam * self.q
+        """q+ = Yosida approximation of G - omega I at (r + lambda q), with lambda omega = 1/2.
+
+        r solves y = (1 - lambda omega) r + lambda p(r): piecewise linear in r with kinks at 0
+        and, for limited penetration, at the depth d, so it is inverted piece by piece.
+        """
+        pts = self.points
+        lam, omega, inv_mu = self.lam, self.omega, pts.inv_mu
+        y = pts.penetration(self.problem.u.x.array) + lam * self.q
         r = np.where(y >= 0, y / (1 - lam * omega + lam * inv_mu), y / (1 - lam * omega))
+        if pts.limited.any():
+            m = pts.limited
+            a1 = 1 - lam * omega[m] + lam * inv_mu[m]
+            yd = a1 * pts.depth[m]
+            deep = y[m] > yd
+            r_m = r[m]
+            r_m[deep] = (pts.depth[m] + (y[m] - yd) / (a1 + lam * pts.inv_mu_stiff[m]))[deep]
+            r[m] = r_m
         self.q = (y - r) / lam

@@ -21,9 +21,13 @@ CSV_COLUMNS = (
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
 
 
-def von_mises_array(s: np.ndarray, dim: int) -> np.ndarray:
-    """von Mises of an array of tensors (n, dim*dim): the paper's plane formula in 2-D."""
+def von_mises_array(s: np.ndarray, dim: int, s33: np.ndarray | None = None) -> np.ndarray:
+    """von Mises of an array of tensors (n, dim*dim): the paper's plane formula in 2-D; with the
+    out-of-plane stresses ``s33`` (plane strain) the full one, sqrt(((a-b)^2 + (b-c)^2 + (c-a)^2)/2 + 3 t^2)."""
     s = s.reshape(-1, dim, dim)
+    if dim == 2 and s33 is not None:
+        a, b, c, t = s[:, 0, 0], s[:, 1, 1], s33, s[:, 0, 1]
+        return np.sqrt(((a - b) ** 2 + (b - c) ** 2 + (c - a) ** 2) / 2 + 3 * t * t)
     if dim == 2:
         a, b, c = s[:, 0, 0], s[:, 1, 1], s[:, 0, 1]
         return np.sqrt(a * a + b * b - a * b + 3 * c * c)
@@ -52,18 +56,22 @@ def on_rank0(comm: MPI.Comm, action: Callable[[], None]) -> None:
 class CSVWriter:
     """Rows of the time series, written by rank 0, each row one ``write()`` of a whole line.
 
+    ``columns``: CSV_COLUMNS and the scene's own (the reactions of its Dirichlet parts).
+
     The file is opened in append mode and every row goes out in a single system call, so
     a killed run leaves only complete rows; a row that does not fit on the disk is cut off
     again (OSError). ``keep`` lines (a restart's rows up to its checkpoint, as written) are
     rewritten first, atomically.
     """
 
-    def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None) -> None:
+    def __init__(self, path: Path, comm: MPI.Comm, keep: list[str] | None = None,
+                 columns: tuple[str, ...] = CSV_COLUMNS) -> None:
         self.comm = comm
         self.fd = None
+        self.columns = columns
 
         def start() -> None:
-            write_text_atomic(path, ",".join(CSV_COLUMNS) + "\n" + "".join(keep or []))
+            write_text_atomic(path, ",".join(columns) + "\n" + "".join(keep or []))
             self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
             self.size = os.fstat(self.fd).st_size
 
@@ -73,7 +81,7 @@ class CSVWriter:
         """Append one row (rank 0; the others do nothing)."""
         if self.fd is None:
             return
-        data = _line(row).encode()
+        data = _line(row, self.columns).encode()
         try:
             if os.write(self.fd, data) != len(data):
                 raise OSError(28, "No space left on device (short write)", None)
@@ -88,8 +96,8 @@ class CSVWriter:
             self.fd = None
 
 
-def _line(row: dict) -> str:
-    return ",".join(_fmt(row[k]) for k in CSV_COLUMNS) + "\n"
+def _line(row: dict, columns: tuple[str, ...] = CSV_COLUMNS) -> str:
+    return ",".join(_fmt(row[k]) for k in columns) + "\n"
 
 
 def _fmt(v) -> str:

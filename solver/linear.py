@@ -10,6 +10,8 @@ from __future__ import annotations
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .errors import ConfigError
+
 
 def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
     """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
@@ -55,10 +57,67 @@ def clear_options(prefix: str, keys) -> None:
             opts.delValue(name)
 
 
+def check_options(comm: MPI.Comm, prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...],
+                  snes: bool = False) -> None:
+    """Raise a ConfigError naming the scene's option under ``prefix`` that PETSc rejects (an unknown
+    type, a value of the wrong kind, a factorization package that is not there).
+
+    The options are tried on a small stand-in: a KSP (or SNES) with the same prefix on a diagonal
+    matrix, set up so that the preconditioner's factorization is created. The culprit is found by
+    trying the scene's options one at a time.
+    """
+    mine = tuple((k, v) for k, v in user if k.lstrip("-").startswith(prefix))
+    if not mine:
+        return
+    reason = _probe(comm, prefix, defaults, mine, snes)
+    if reason is None:
+        return
+    for key, value in mine:
+        alone = _probe(comm, prefix, defaults, ((key, value),), snes)
+        if alone is not None:
+            raise ConfigError(key=f"solver.petsc_options.{key}", value=value, allowed=f"PETSc rejects it: {alone}")
+    raise ConfigError(key="solver.petsc_options", value=dict(mine), allowed=f"PETSc rejects them together: {reason}")
+
+
+def _probe(comm: MPI.Comm, prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...],
+           snes: bool) -> str | None:
+    """None if PETSc accepts the options on a stand-in problem, else the last line of its error."""
+    set_options(prefix, defaults, user)
+    A = PETSc.Mat().createAIJ(((1, None), (1, None)), nnz=(1, 0), comm=comm)
+    start, _ = A.getOwnershipRange()
+    A.setValue(start, start, 1.0)
+    A.assemble()
+    obj = ksp = None
+    try:
+        if snes:
+            obj = PETSc.SNES().create(comm)
+            obj.setOptionsPrefix(prefix)
+            obj.setFromOptions()
+            ksp = obj.getKSP()
+        else:
+            obj = ksp = PETSc.KSP().create(comm)
+            ksp.setOptionsPrefix(prefix)
+        ksp.setOperators(A)
+        ksp.setFromOptions()
+        ksp.setUp()
+        return None
+    except PETSc.Error as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        return lines[-1].removeprefix("[0] ") if lines else f"error code {exc.ierr}"
+    finally:
+        if obj is not None:
+            obj.destroy()
+        A.destroy()
+        clear_options(prefix, defaults)
+        clear_options("", [k.lstrip("-") for k, _ in user])
+
+
 def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, str], ...],
              kind: str = "auto", symmetric: bool = True) -> PETSc.KSP:
-    """A KSP on a matrix; with the default options it factors once, and again only if A changes."""
+    """A KSP on a matrix; with the default options it factors once, and again only if A changes.
+    Options PETSc rejects raise a ConfigError first (:func:`check_options`)."""
     defaults = direct_options(comm, kind, symmetric)
+    check_options(comm, prefix, defaults, user)
     set_options(prefix, defaults, user)
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)

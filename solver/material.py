@@ -1,4 +1,5 @@
-"""Constitutive functions as pure UFL (docs/model.md §2): elasticity A, truncation Phi_L, von Mises."""
+"""Constitutive functions as pure UFL (docs/model.md §2): elasticity A, its out-of-plane stress in plane strain,
+truncation Phi_L, von Mises."""
 
 from __future__ import annotations
 
@@ -31,8 +32,18 @@ def truncate(tau, L: float) -> ufl.core.expr.Expr:
     return ufl.as_matrix([[ufl.max_value(-L, ufl.min_value(L, tau[i, j])) for j in range(m)] for i in range(n)])
 
 
-def von_mises(tau) -> ufl.core.expr.Expr:
-    """The paper's von Mises norm of a plane stress field (2-D); the usual one in 3-D."""
+def out_of_plane_stress(eps, E: float, nu: float) -> ufl.core.expr.Expr:
+    """(A eps)_33 in plane strain (eps_33 = 0): lambda (eps_11 + eps_22)."""
+    lam, _ = lame(E, nu, "plane_strain")
+    return lam * ufl.tr(eps)
+
+
+def von_mises(tau, s33=None) -> ufl.core.expr.Expr:
+    """The paper's von Mises norm of a plane stress field (2-D); with the out-of-plane stress
+    ``s33`` (plane strain) the full formula; the usual one in 3-D."""
+    if tau.ufl_shape[0] == 2 and s33 is not None:
+        a, b, c = tau[0, 0], tau[1, 1], s33
+        return ufl.sqrt(((a - b) ** 2 + (b - c) ** 2 + (c - a) ** 2) / 2 + 3 * tau[0, 1] ** 2)
     if tau.ufl_shape[0] == 2:
         return ufl.sqrt(tau[0, 0] ** 2 + tau[1, 1] ** 2 - tau[0, 0] * tau[1, 1] + 3 * tau[0, 1] ** 2)
     s = ufl.dev(tau)

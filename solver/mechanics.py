@@ -4,11 +4,12 @@
 
 :class:`Mechanics` wires the parts together, each owning one idea:
 
-- :mod:`operators`: Dirichlet conditions, K, B and b_n, assembled once or once per level;
+- :mod:`operators`: Dirichlet conditions (and the rigid-motion check), K, B and b_n, assembled
+  once or once per level;
 - :class:`contact.ContactTerm`: j(u, w), its Jacobian and the active set;
 - :mod:`displacement`: F(u), J(u), and the residual carried from level to level;
 - :mod:`newton` / :mod:`fixed_point`: the methods (``solver.method``), one interface ``solve(scale)``;
-- :mod:`diagnostics`: what the time series reports about u.
+- :mod:`diagnostics`: what the time series reports about u, the reactions of the Dirichlet parts.
 """
 
 from __future__ import annotations
@@ -18,17 +19,17 @@ import ufl
 from dolfinx import fem
 from petsc4py import PETSc
 
-from .config import BoundaryConfig, MaterialConfig, SolverConfig
+from .config import BodyForceConfig, BoundaryConfig, MaterialConfig, SolverConfig
 from .contact import ContactTerm
 from .contact_points import ContactPoints
-from .diagnostics import DisplacementDiagnostics
+from .diagnostics import DisplacementDiagnostics, Reactions
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .fixed_point import FixedPointSolver, PenaltyDualitySolver
 from .geometry import Geometry
 from .memory import History
 from .newton import NewtonSolver
-from .operators import Operators, clamped_conditions
+from .operators import Dirichlet, Operators, check_rigid_motions
 
 __all__ = ["Mechanics", "SolveInfo", "DisplacementSolveError"]
 
@@ -38,18 +39,20 @@ class Mechanics:
 
     def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
                  boundaries: tuple[BoundaryConfig, ...], settings: SolverConfig, history: History | None = None,
-                 implicit_term=None) -> None:
+                 implicit_term=None, body_force: BodyForceConfig | None = None) -> None:
         self.u = u
-        clamped = tuple(b for b in boundaries if b.role == "clamped")
         tractions = tuple(b for b in boundaries if b.role == "traction")
         parts = tuple(b for b in boundaries if b.role == "contact")
         deg = settings.contact_quadrature_degree
-        bcs = clamped_conditions(geo, u.function_space, clamped)
+        dirichlet = Dirichlet(geo, u.function_space, boundaries)
+        check_rigid_motions(geo, u.function_space, dirichlet)
+        bcs = dirichlet.bcs
         arguments = (ufl.TrialFunction(u.function_space), ufl.TestFunction(u.function_space))
         self.contact = ContactTerm(geo, u, arguments, parts, deg, bcs) if parts else None
         # the contact Jacobian's stencil is part of K's sparsity, so K + C is formed in place
         pattern = self.contact.jacobian_ufl if self.contact is not None else None
-        self.ops = Operators(geo, arguments, material, bcs, tractions, history, pattern_extra=pattern)
+        self.ops = Operators(geo, arguments, material, dirichlet, tractions, history, pattern_extra=pattern,
+                             body_force=body_force)
         self.problem = DisplacementProblem(u, self.ops, self.contact, implicit_term)
         # the contact term at its points (2-D): the fixed-point methods and the penetration diagnostic
         points = ContactPoints(geo, u.function_space, parts, deg) if parts and geo.dim == 2 else None
@@ -60,7 +63,7 @@ class Mechanics:
             self.solver = FixedPointSolver(self.problem, points, settings, geo.comm)
         else:
             self.solver = PenaltyDualitySolver(self.problem, points, settings, geo.comm, geo, parts)
-        self.diagnostics = DisplacementDiagnostics(geo, u, parts, deg, points)
+        self.diagnostics = DisplacementDiagnostics(geo, u, parts, deg, points, Reactions(self.problem))
 
     def solve(self, t: float) -> SolveInfo:
         """Solve for u at time t (u holds the previous level as initial guess)."""

@@ -175,6 +175,34 @@ class MemorySource:
         return out
 
 
+class OutOfPlaneSource:
+    """H_33 = zeta Phi_L(lambda tr eps(u)) at the rule's points: the 33 entry of zeta Phi_L(A eps(u)) in plane strain.
+
+    In plane strain eps_33 = 0, so (A eps)_33 = lambda (eps_11 + eps_22); Phi_L truncates
+    componentwise, so the 33 entry of the truncated tensor is the truncated 33 entry.
+    Uses the strain operator of the in-plane :class:`MemorySource`.
+    """
+
+    def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
+        self.source = source
+        self.Q = rule.space(())
+
+    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
+        src, d = self.source, self.source.d
+        e = (src.G @ src.u.x.array).reshape(-1, d * d)
+        h = e[:, list(range(0, d * d, d + 1))].sum(axis=1)
+        h *= src.lame_lambda
+        np.clip(h, -src.L, src.L, out=h)
+        if src.Zq is not None:
+            h *= src.Zq @ src.zeta.x.array
+        else:
+            h *= float(src.zeta.value)
+        if out is None:
+            return h
+        out[:] = h
+        return out
+
+
 class History:
     """Base: the memory tensor M (a quadrature function) and its update after a step."""
 
@@ -271,6 +299,35 @@ class TabulatedHistory(History):
 
     def state(self) -> dict[str, np.ndarray]:
         return {"M": self.M.x.array, "past": self.past}
+
+
+class PlaneStrainHistory(History):
+    """The in-plane history and the out-of-plane one M_33 (plane strain), committed and checkpointed together.
+
+    M_33 follows the same kernel and rule as M, with H_33 (:class:`OutOfPlaneSource`) as its
+    integrand; it enters no equation (sigma_33 is a reaction of the plane-strain constraint)
+    and is read by the outputs: sigma_33 = lambda tr eps(u_n) + M_33,n. Everything else is
+    the in-plane history's.
+    """
+
+    def __init__(self, main: History, out_of_plane: History) -> None:
+        self.main, self.out_of_plane = main, out_of_plane
+        self.M33 = out_of_plane.M
+
+    def __getattr__(self, name: str):
+        return getattr(self.main, name)
+
+    def commit(self, n: int) -> None:
+        self.main.commit(n)
+        self.out_of_plane.commit(n)
+
+    def set_current(self, h: np.ndarray) -> None:
+        """The extrapolated trapezoid's current term for both (H_33 evaluated at the same, extrapolated, u)."""
+        self.main.set_current(h)
+        self.out_of_plane.set_current(self.out_of_plane.H())
+
+    def state(self) -> dict[str, np.ndarray]:
+        return {**self.main.state(), **{f"zz_{k}": v for k, v in self.out_of_plane.state().items()}}
 
 
 def memory_source(u, zeta, A, L: float):

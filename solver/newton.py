@@ -16,7 +16,7 @@ from petsc4py import PETSc
 from .config import SolverConfig
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
-from .linear import REASONS_SNES, clear_options, direct_options, set_options
+from .linear import REASONS_SNES, check_options, clear_options, direct_options, set_options
 
 
 class NewtonSolver:
@@ -43,6 +43,7 @@ class NewtonSolver:
             # not a divergence, so PETSc's residual-growth test is off (max_it still applies)
             "snes_divergence_tolerance": "-1",
         })
+        check_options(comm, self.prefix, defaults, settings.petsc_options, snes=True)
         set_options(self.prefix, defaults, settings.petsc_options)
         snes = PETSc.SNES().create(comm)
         snes.setOptionsPrefix(self.prefix)

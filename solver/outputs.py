@@ -7,6 +7,10 @@ computed. The series itself is :class:`solver.xdmf.XDMFSeries`. P2 fields
 (``discretization.u_degree`` or ``zeta_degree`` = 2) are written as their P1 interpolants on
 the mesh, their exact values at the vertices: ParaView shows the vertex values the solver
 computed and interpolates linearly in between.
+
+In plane strain the out-of-plane stress sigma_33 = lambda tr eps(u) + M_33 (docs/model.md
+§2) is part of the stress: the von Mises values include it, and ``stress_zz`` /
+``elastic_stress_zz`` write it (requested in ``output.fields``; plane strain only).
 """
 
 from __future__ import annotations
@@ -25,7 +29,9 @@ from .material import lame, strain
 from .xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
-         "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar")}
+         "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
+         "stress_zz": ("Cell", "Scalar"), "elastic_stress_zz": ("Cell", "Scalar")}
+PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
 
 
 class CellStresses:
@@ -37,6 +43,7 @@ class CellStresses:
     of the quadrature rule that integrates it everywhere else; on affine cells its L2
     projection onto constants with that rule is the weighted mean of its point values. Rows
     are in the local order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
+    In plane strain, sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
     """
 
     def __init__(self, model, material: MaterialConfig) -> None:
@@ -44,6 +51,8 @@ class CellStresses:
         self.d = d = mesh.geometry.dim
         self.u, self.history = model.u, model.history
         self.lam, self.mu = lame(material.E, material.nu, material.model)
+        self.plane_strain = material.model == "plane_strain" and d == 2
+        self._trace: np.ndarray | None = None
         self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
         E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
         eps = strain(ufl.TrialFunction(model.u.function_space))
@@ -66,6 +75,8 @@ class CellStresses:
             self.npts = npts
             self.points = RowMap(self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], d * d)
             self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
+            if self.plane_strain:  # M_33 is a scalar at the same points
+                self.points_zz = RowMap(self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], 1)
 
     def elastic(self) -> np.ndarray:
         """A eps(u) per owned cell, rows of d*d (row-major)."""
@@ -74,6 +85,7 @@ class CellStresses:
         d = self.d
         s = np.empty((len(e), d, d))
         trace = e[:, :d].sum(axis=1)
+        self._trace = trace
         for k, (i, j) in enumerate(self.pairs):
             if i == j:
                 s[:, i, i] = 2.0 * self.mu * e[:, k] + self.lam * trace
@@ -85,16 +97,27 @@ class CellStresses:
         """sigma = A eps(u) + (cell average of M), given A eps(u)."""
         if self.history is None:
             return elastic
-        dd = self.d * self.d
-        memory = self.history.M.x.array
+        return elastic + self._cell_average(self.history.M.x.array, self.history.H, self.points, self.d * self.d)
+
+    def out_of_plane(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_33, (A eps)_33) per owned cell in plane strain, after :meth:`elastic`: eps_33 = 0, so
+        (A eps)_33 = lambda tr eps(u), and sigma_33 adds the cell average of the memory's M_33."""
+        elastic = self.lam * self._trace
+        if self.history is None:
+            return elastic, elastic
+        zz = self.history.out_of_plane
+        return elastic + self._cell_average(zz.M.x.array, zz.H, self.points_zz, 1)[:, 0], elastic
+
+    def _cell_average(self, memory: np.ndarray, source, points: RowMap, width: int) -> np.ndarray:
+        """Cell averages of a memory tensor at the rule's points (rows of ``width``)."""
         weight = getattr(self.history, "current_weight", None)
         if weight is not None and float(weight.value) != 0.0:
             # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
-            memory = memory + float(weight.value) * self.history.H()
-        M = self.points.take(memory)
+            memory = memory + float(weight.value) * source()
+        M = points.take(memory)
         if self.npts == 1:  # one point per cell: the average is the value
-            return elastic + M
-        return elastic + (M.reshape(-1, self.npts, dd) * self.q_weights).sum(axis=1)
+            return M
+        return (M.reshape(-1, self.npts, width) * self.q_weights).sum(axis=1)
 
 
 class Outputs:
@@ -109,7 +132,9 @@ class Outputs:
         mesh = model.geo.mesh
         self.d = mesh.geometry.dim
         self.series = None
-        self.names = [f for f in output.fields if f != "damage" or model.damage is not None]
+        plane_strain = material.model == "plane_strain" and self.d == 2
+        self.names = [f for f in output.fields if (f != "damage" or model.damage is not None)
+                      and (f not in PLANE_STRAIN_ONLY or plane_strain)]
         if outdir is None or not self.names:
             return
         self.model = model
@@ -133,9 +158,13 @@ class Outputs:
         if want & {"stress", "von_mises"}:
             out["stress"] = self.stresses.total(elastic)
         out["elastic_stress"] = elastic
+        zz = {"stress": None, "elastic_stress": None}
+        if self.stresses.plane_strain:
+            zz["stress"], zz["elastic_stress"] = self.stresses.out_of_plane()
+            out["stress_zz"], out["elastic_stress_zz"] = zz["stress"], zz["elastic_stress"]
         for tensor, scalar in (("stress", "von_mises"), ("elastic_stress", "von_mises_elastic")):
             if scalar in want:
-                out[scalar] = von_mises_array(out[tensor], self.d)
+                out[scalar] = von_mises_array(out[tensor], self.d, zz[tensor])
         return out
 
     def write(self, t: float) -> None:
@@ -150,7 +179,8 @@ class Outputs:
             elif name == "damage":
                 values[name] = self.rows.rows(self._node_fields[name]())
             else:
-                values[name] = tensor6(cells[name], self.d) if name in ("stress", "elastic_stress") else cells[name]
+                values[name] = (tensor6(cells[name], self.d, cells.get(name + "_zz")) if name in ("stress", "elastic_stress")
+                                else cells[name])
         try:
             self.series.write(t, values)
         except SeriesError as exc:

@@ -30,10 +30,18 @@ from .damage import Damage
 from .diagnostics import DamageDiagnostics
 from .errors import NonFiniteError, OutputError, SolveFailure
 from .geometry import Geometry, build
-from .io import CSVWriter, on_rank0, write_text_atomic
+from .io import CSV_COLUMNS, CSVWriter, on_rank0, write_text_atomic
 from .material import elasticity, lame
 from .mechanics import Mechanics
-from .memory import History, MemorySource, QuadratureRule, make_history, trapezoid_term
+from .memory import (
+    History,
+    MemorySource,
+    OutOfPlaneSource,
+    PlaneStrainHistory,
+    QuadratureRule,
+    make_history,
+    trapezoid_term,
+)
 from .outputs import Outputs
 
 
@@ -83,7 +91,10 @@ def build_model(cfg: Config, comm: MPI.Comm) -> Model:
     implicit = None
     if history is not None and cfg.memory.rule == "trapezoid":
         implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
-    mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit)
+    if history is not None and mat.model == "plane_strain":  # sigma_33 has a memory part too
+        history = PlaneStrainHistory(history, make_history(cfg.memory, rule, OutOfPlaneSource(rule, source), k, steps))
+    mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit,
+                     body_force=cfg.body_force)
     u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
     return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev)
 
@@ -198,7 +209,8 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
     levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
     out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
-    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep) if outdir is not None else None
+    columns = CSV_COLUMNS + model.mech.diagnostics.columns
+    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
     rows: list[dict] = []

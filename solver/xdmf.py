@@ -272,14 +272,17 @@ def vector3(rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def tensor6(rows: np.ndarray, dim: int) -> np.ndarray:
-    """Symmetric tensors (rows of dim*dim, row-major) as XX, YY, ZZ, XY, YZ, XZ (ParaView's order; 2-D: ZZ, YZ, XZ = 0).
+def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndarray:
+    """Symmetric tensors (rows of dim*dim, row-major) as XX, YY, ZZ, XY, YZ, XZ (ParaView's order; 2-D: YZ, XZ = 0,
+    and ZZ = ``zz`` where given (plane strain's sigma_33), else 0).
 
     The symmetric part is written: (T + T^T)/2, which is T for the stresses written here.
     """
     t = rows.reshape(len(rows), dim, dim)
     out = np.zeros((len(rows), 6), dtype=rows.dtype)
     out[:, 0], out[:, 1], out[:, 3] = t[:, 0, 0], t[:, 1, 1], 0.5 * (t[:, 0, 1] + t[:, 1, 0])
+    if dim == 2 and zz is not None:
+        out[:, 2] = zz
     if dim == 3:
         out[:, 2] = t[:, 2, 2]
         out[:, 4] = 0.5 * (t[:, 1, 2] + t[:, 2, 1])

@@ -70,6 +70,29 @@ def test_solver_failure_stops_cleanly(tmp_path, nproc):
         assert h5.attrs["step"] == 10
 
 
+# on 2 ranks the default factorization is redundant: its options carry the redundant_ prefix
+@pytest.mark.parametrize("nproc,option,value,reason", [
+    (1, "mech_ksp_type", "nonsense", "Unable to find requested KSP type nonsense"),
+    (2, "mech_ksp_type", "nonsense", "Unable to find requested KSP type nonsense"),
+    (1, "mech_pc_factor_mat_solver_type", "nonsense", "Could not locate solver type nonsense"),
+    (2, "mech_redundant_pc_factor_mat_solver_type", "nonsense", "Could not locate solver type nonsense"),
+    (1, "mech_snes_max_it", "abc", "Input string abc has no integer value"),
+    (1, "damage_ksp_type", "nonsense", "Unable to find requested KSP type nonsense"),
+])
+def test_petsc_option_petsc_rejects_is_one_line_exit_2(tmp_path, nproc, option, value, reason):
+    """An option PETSc rejects is bad input like any other: one line naming it, exit 2, nothing written."""
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL,
+               "--set", f"solver.petsc_options.{option}={value}"], nproc)
+    assert res.returncode == 2, res.stderr
+    ours = [ln for ln in res.stderr.splitlines() if ln.startswith("error")]
+    assert len(ours) == 1 and "Traceback" not in res.stderr and "PETSC ERROR" not in res.stderr
+    assert ours[0].startswith(f"error: solver.petsc_options.{option} = '{value}': PETSc rejects it: ")
+    assert reason in ours[0] and not out.exists()
+    if nproc == 1:
+        assert res.stderr.strip() == ours[0]
+
+
 FULL_DISK = ["run", "configs/example1.toml", "--no-progress", "--set", "mesh.nx=16", "--set", "mesh.ny=16",
              "--set", "time.T=0.1", "--set", "time.k=0.001", "--set", "output.checkpoint_every=10",
              "--set", 'output.fields=["displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic"]']

@@ -85,6 +85,45 @@ REJECT = [
     ({"solver": {"rtol": 2.0}}, "solver.rtol"),
     ({"solver": {"petsc_options": {"mech_x": [1]}}}, "solver.petsc_options.mech_x"),
     ({"output": {"every": -1}}, "output.every"),
+    # prescribed displacements and the rigid motions
+    ({"boundary": {"left": {"role": "displacement"}}}, "boundary.left.displacement"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": [0.0]}}}, "boundary.left.displacement"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": [0.0, "fixed"]}}}, "boundary.left.displacement[1]"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": ["free", "free"]}}}, "boundary.left.displacement"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": [0.0, [[1, 0], [0, 1]]]}}},
+     "boundary.left.displacement[1]"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": [0.0, [0.1]]}}}, "boundary.left.displacement[1]"),
+    ({"boundary": {"left": {"role": "clamped", "displacement": [0.0, 0.0]}}}, "boundary.left.displacement"),
+    ({"boundary": {"left": {"role": "displacement", "displacement": [0.0, "free"]}, "bottom": {"role": "contact"}}},
+     "no part fixes u_y"),
+    # compliance laws and gaps
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "hertz"}}}, "boundary.bottom.law"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "power", "exponent": 2.0}}},
+     "boundary.bottom.coefficient"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "power", "coefficient": 1.0,
+                                                            "exponent": 0.5}}}, "boundary.bottom.exponent"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "power", "coefficient": 1.0,
+                                                            "exponent": 2.0, "mu": 1e-10}}}, "boundary.bottom.mu"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "coefficient": 1.0}}},
+     "boundary.bottom.coefficient"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "limited_penetration", "mu": 1e-2}}},
+     "boundary.bottom.depth"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "limited_penetration", "mu": 1e-2,
+                                                            "depth": 0.1, "mu_stiff": 1.0}}}, "boundary.bottom.mu_stiff"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap": [[0.0, 0.1], [0.0, 0.2]]}}},
+     "boundary.bottom.gap"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap": [0.0, 0.1]}}}, "boundary.bottom.gap"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap_coordinate": "x"}}},
+     "boundary.bottom.gap_coordinate"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap": [[0, 0], [1, 0]], "gap_coordinate": "z"}}},
+     "boundary.bottom.gap_coordinate"),
+    ({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "law": "power", "coefficient": 1.0,
+                                                            "exponent": 2.0}},
+      "solver": {"method": "penalty_duality"}}, "solver.method"),
+    # body force
+    ({"body_force": {"f": [0.0, -9.81, 0.0]}}, "body_force.f"),
+    ({"body_force": {"g": [0.0, -9.81]}}, "body_force.g"),
+    ({"body_force": {"f": [[0.0, 0.0, 0.0], [-1.0, 0.0, 1.0]]}}, "body_force.f"),
 ]
 
 
@@ -119,6 +158,50 @@ def test_override_syntax():
     with pytest.raises(ConfigError, match="section.key"):
         apply_overrides({}, ["nx=3"])
     assert apply_overrides({}, ["mesh.diagonal=left"]) == {"mesh": {"diagonal": "left"}}
+    assert apply_overrides({}, ["mesh.nx=3"]) == {"mesh": {"nx": 3}}  # the value syntax is TOML's
+
+
+def test_new_keys_round_trip_and_defaults(tmp_path):
+    """Body force, displacement parts, laws and gap tables survive dumps -> load; gap coordinates default by side."""
+    cfg = from_dict({
+        "boundary": {
+            "left": {"role": "displacement", "displacement": [0.0, "free"]},
+            "bottom": {"role": "displacement", "displacement": ["free", [[0.0, 0.0], [1.0, -0.1]]]},
+            "top": {"role": "contact", "gap": [[0.0, 0.1], [1.0, 0.2]], "law": "power", "coefficient": 1e3, "exponent": 1.5},
+            "right": {"role": "contact", "gap": [[0.0, 0.0], [1.0, 0.1]], "law": "limited_penetration", "mu": 1e-2,
+                      "depth": 0.01},
+        },
+        "body_force": {"f": [[0.0, 0.0, 0.0], [1.0, 0.0, -9.81]]},
+    })
+    path = tmp_path / "c.toml"
+    path.write_text(dumps(cfg))
+    again = load(path)
+    assert again == Config(**{**cfg.__dict__, "source": str(path)})
+    parts = {b.name: b for b in cfg.boundaries}
+    assert parts["top"].gap_coordinate == "x" and parts["right"].gap_coordinate == "y"
+    assert parts["right"].mu_stiff == 1e-10
+    assert parts["left"].fixed(2) == (True, False) and parts["bottom"].displacement_at(0.5, 2) == (None, -0.05)
+    assert cfg.body_force.at(0.25) == pytest.approx((0.0, -9.81 / 4))
+    assert from_dict({}).body_force.f == ()  # no [body_force]: no body force term at all
+
+
+def test_a_scene_without_a_clamped_part_is_valid_when_every_direction_is_fixed():
+    cfg = from_dict({"boundary": {"left": {"role": "displacement", "displacement": [0.0, "free"]},
+                                  "bottom": {"role": "displacement", "displacement": ["free", 0.0]},
+                                  "top": {"role": "traction", "traction": [0.0, -1.0]}}})
+    assert [b.role for b in cfg.dirichlet] == ["displacement", "displacement"] and not cfg.clamped
+
+
+def test_gap_table_on_a_gmsh_part_needs_its_coordinate():
+    data = {"mesh": {"kind": "gmsh", "file": "meshes/example2.msh"},
+            "boundary": {"clamped": {"role": "clamped"}, "contact": {"role": "contact", "gap": [[0.0, 0.0], [1.0, 0.1]]}}}
+    with pytest.raises(ConfigError) as err:
+        from_dict(data, source="scene.toml", base=ROOT)
+    assert err.value.key == "boundary.contact.gap_coordinate"
+    data["boundary"]["contact"]["gap_coordinate"] = "y"
+    assert from_dict(data, base=ROOT).contact[0].gap_table == ((0.0, 0.0), (1.0, 0.1))
+
+
     # values are TOML; a bare word is a string
     assert apply_overrides({}, ["time.k=1e-3", "mesh.corners=[[0, 0], [2, 1]]", "solver.linear=mumps"]) == {
         "time": {"k": 1e-3}, "mesh": {"corners": [[0, 0], [2, 1]]}, "solver": {"linear": "mumps"}}

@@ -7,7 +7,7 @@ from conftest import eval_point, unit_mesh
 from dolfinx import fem
 
 from solver.io import von_mises_array
-from solver.material import elasticity, lame, truncate, von_mises
+from solver.material import elasticity, lame, out_of_plane_stress, truncate, von_mises
 
 
 def test_plane_stress_matches_paper_formula(comm):
@@ -53,3 +53,18 @@ def test_strain_of_linear_field_is_exact(comm):
     u.interpolate(lambda x: np.vstack([2 * x[0] + 3 * x[1], -x[0] + 5 * x[1]]))
     got = eval_point(ufl.sym(ufl.grad(u)), m)
     assert np.allclose(got, [[2.0, 1.0], [1.0, 5.0]], atol=1e-13)
+
+
+def test_von_mises_plane_strain_uses_sigma_33(comm):
+    """sqrt(((s11-s22)^2 + (s22-s33)^2 + (s33-s11)^2)/2 + 3 s12^2); with s33 = 0 the paper's plane formula."""
+    m = unit_mesh(comm)
+    tau = np.array([[3.0, 1.0], [1.0, -2.0]])
+    s33 = 4.0
+    want = np.sqrt(((3 + 2) ** 2 + (-2 - 4) ** 2 + (4 - 3) ** 2) / 2 + 3)
+    assert eval_point(von_mises(fem.Constant(m, tau), fem.Constant(m, s33)), m) == pytest.approx(want, rel=1e-14)
+    assert von_mises_array(tau.ravel(), 2, np.array([s33]))[0] == pytest.approx(want, rel=1e-14)
+    assert von_mises_array(tau.ravel(), 2, np.array([0.0]))[0] == pytest.approx(von_mises_array(tau.ravel(), 2)[0], rel=1e-14)
+    # sigma_33 of A in plane strain: lambda (eps11 + eps22)
+    eps = np.array([[0.01, 0.002], [0.002, -0.004]])
+    lam, _ = lame(100.0, 0.3, "plane_strain")
+    assert eval_point(out_of_plane_stress(fem.Constant(m, eps), 100.0, 0.3), m) == pytest.approx(lam * 0.006, rel=1e-14)

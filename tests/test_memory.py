@@ -124,6 +124,47 @@ def test_fast_source_equals_ufl_expression(comm, degree, damage):
     assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > L
 
 
+@pytest.mark.parametrize("kernel", [{"kernel": "constant", "weights": [1.0]},
+                                    {"kernel": "exponential", "weights": [-1.0], "times": [1.0]}])
+def test_plane_strain_sigma_33_has_its_memory_part(comm, kernel):
+    """Plane strain, uniaxial stress t (rollers on the left and the bottom): every field is uniform.
+    sigma_33 = lambda tr eps(u_n) + M_33,n with M_33 the kernel's sum of zeta0 Phi_L(lambda tr eps(u_m)),
+    truncated (L = 3 < lambda tr eps); the von Mises value includes it."""
+    from solver.config import from_dict
+    from solver.io import von_mises_array
+    from solver.outputs import CellStresses
+    from solver.stepper import build_model
+
+    E, nu, t, k, L, zeta0 = 100.0, 0.3, 10.0, 0.1, 3.0, 0.8
+    cfg = from_dict({
+        "mesh": {"nx": 3, "ny": 2, "corners": [[0, 0], [2, 1]]}, "material": {"E": E, "nu": nu, "model": "plane_strain"},
+        "boundary": {"left": {"role": "displacement", "displacement": [0.0, "free"]},
+                     "bottom": {"role": "displacement", "displacement": ["free", 0.0]},
+                     "right": {"role": "traction", "traction": [t, 0.0]}},
+        "memory": {**kernel, "L": L}, "damage": {"enabled": False, "zeta0": zeta0}, "time": {"T": 0.4, "k": k}})
+    model = build_model(cfg, comm)
+    cells = CellStresses(model, cfg.material)
+    lam, mu = lame(E, nu, "plane_strain")
+    A2 = np.array([[lam + 2 * mu, lam], [lam, lam + 2 * mu]])
+    g = (lambda s: 1.0) if kernel["kernel"] == "constant" else (lambda s: -math.exp(-s))
+    H = []  # (H_xx, H_yy, H_33) of each level
+    for n in range(cfg.time.steps + 1):
+        model.mech.solve(n * k)
+        M = k * sum(g((n - m) * k) * np.array(H[m]) for m in range(n)) if n else np.zeros(3)
+        exx, eyy = np.linalg.solve(A2, [t - M[0], -M[1]])
+        s33_el = lam * (exx + eyy)
+        H.append(zeta0 * np.clip([t - M[0], -M[1], s33_el], -L, L))
+        elastic = cells.elastic()
+        zz, zz_el = cells.out_of_plane()
+        vm = von_mises_array(cells.total(elastic), 2, zz)
+        assert np.allclose(zz_el, s33_el, rtol=1e-10, atol=0), n
+        assert np.allclose(zz, s33_el + M[2], rtol=1e-10, atol=0), n
+        want_vm = von_mises_array(np.array([t, 0.0, 0.0, 0.0]), 2, np.array([s33_el + M[2]]))[0]
+        assert np.allclose(vm, want_vm, rtol=1e-10, atol=0), n
+        model.history.commit(n)
+    assert abs(H[0][2]) == pytest.approx(zeta0 * L)  # the truncation of the 33 entry acted
+
+
 def _patch(rule: str, k: float):
     return from_dict({
         "mesh": {"nx": 4, "ny": 3, "corners": [[0, 0], [2, 1]]},

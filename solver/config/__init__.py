@@ -8,7 +8,8 @@ computation starts. See :mod:`solver.config.scene` for how sections are register
 """
 
 from ..errors import ConfigError
-from .boundary import PAPER_BOUNDARIES, ROLES, SIDES, BoundaryConfig, table_at
+from .body_force import BodyForceConfig
+from .boundary import LAWS, PAPER_BOUNDARIES, ROLES, SIDES, BoundaryConfig, table_at
 from .damage import DamageConfig
 from .discretization import DiscretizationConfig
 from .material import MODELS, MaterialConfig
@@ -20,8 +21,9 @@ from .solver import DAMAGE_SCHEMES, METHODS, SolverConfig
 from .time import TimeConfig
 
 __all__ = [
-    "BoundaryConfig", "Config", "ConfigError", "DamageConfig", "DiscretizationConfig", "MaterialConfig", "MemoryConfig", "MeshConfig",
-    "OutputConfig", "SolverConfig", "TimeConfig", "SECTIONS", "PAPER_BOUNDARIES", "ROLES", "SIDES", "MODELS",
+    "BodyForceConfig", "BoundaryConfig", "Config", "ConfigError", "DamageConfig", "DiscretizationConfig", "MaterialConfig",
+    "MemoryConfig", "MeshConfig", "OutputConfig", "SolverConfig", "TimeConfig", "SECTIONS", "PAPER_BOUNDARIES", "ROLES",
+    "LAWS", "SIDES", "MODELS",
     "KERNELS", "DIAGONALS", "MAX_CELLS", "METHODS", "DAMAGE_SCHEMES", "apply_overrides", "dumps", "from_dict",
     "load", "parse_override", "to_dict", "table_at",
 ]

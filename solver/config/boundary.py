@@ -1,22 +1,31 @@
-"""[boundary.NAME]: named boundary parts and their roles (clamped, traction, contact)."""
+"""[boundary.NAME]: named boundary parts and their roles (clamped, displacement, traction, contact)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
 
 SIDES = ("left", "right", "bottom", "top")
-ROLES = ("clamped", "traction", "contact")
+ROLES = ("clamped", "displacement", "traction", "contact")
+LAWS = ("linear", "power", "limited_penetration")
+AXES = ("x", "y", "z")
+FREE = "free"
 # The paper's Example 1 boundary (docs/model.md §5), used when a scene gives none.
 PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
     "left": {"role": "clamped"},
     "right": {"role": "traction", "traction": [-10.0, -10.0]},
     "bottom": {"role": "contact", "gap": 0.0, "mu": 1e-10},
 }
-_PER_ROLE = {"clamped": (), "traction": ("traction",), "contact": ("gap", "mu")}
+# keys of a compliance law (beside law, gap and gap_coordinate)
+_LAW_KEYS = {"linear": ("mu",), "power": ("coefficient", "exponent"), "limited_penetration": ("mu", "depth", "mu_stiff")}
+_CONTACT_KEYS = ("gap", "gap_coordinate", "law", "mu", "coefficient", "exponent", "depth", "mu_stiff")
+_PER_ROLE = {"clamped": (), "displacement": ("displacement",), "traction": ("traction",), "contact": _CONTACT_KEYS}
+_KEYS = ("role", "side", "interval", "traction", "displacement", *_CONTACT_KEYS)
+
+Table = tuple[tuple[float, ...], ...]
 
 
 def table_at(rows: tuple[tuple[float, ...], ...], t: float) -> tuple[float, ...]:
@@ -46,19 +55,65 @@ class BoundaryConfig:
     a physical group. ``traction`` is a constant vector, or a table of rows
     ``[t, f_x, f_y(, f_z)]`` interpolated linearly in time (a repeated time is a
     jump; at the jump time the earlier row wins).
+
+    ``displacement`` (role ``displacement``): one entry per component, each a table of
+    rows (t, value) linear in t, or None for a free component (``clamped`` is all zeros).
+
+    Contact: the gap is ``gap`` or, when ``gap_table`` holds rows (s, g), piecewise linear
+    in the coordinate ``gap_coordinate`` (held constant beyond the table). The compliance
+    law p(r) of -sigma_nu = p(u_nu - g):
+
+    - ``linear``: p(r) = r_+ / mu (the paper's);
+    - ``power``: p(r) = coefficient r_+^exponent (exponent >= 1);
+    - ``limited_penetration``: p(r) = r_+ / mu + (r - depth)_+ / mu_stiff: a soft layer of
+      thickness ``depth`` on a stiff foundation; Signorini's condition at u_nu = g + depth
+      as mu_stiff -> 0.
     """
 
     name: str
     role: str
     side: str = ""
     interval: tuple[float, float] | None = None
-    traction: tuple[tuple[float, ...], ...] = ()
+    traction: Table = ()
     gap: float = 0.0
     mu: float = 1e-10
+    gap_table: tuple[tuple[float, float], ...] = ()
+    gap_coordinate: str = ""
+    law: str = "linear"
+    coefficient: float = 0.0
+    exponent: float = 1.0
+    depth: float = 0.0
+    mu_stiff: float = 1e-10
+    displacement: tuple[Table | None, ...] = ()
 
     def traction_at(self, t: float) -> tuple[float, ...]:
         """Traction vector at time ``t`` (left-continuous at jumps)."""
         return table_at(self.traction, t)
+
+    @property
+    def dirichlet(self) -> bool:
+        """Whether the part prescribes displacements (clamped or displacement)."""
+        return self.role in ("clamped", "displacement")
+
+    def fixed(self, dim: int) -> tuple[bool, ...]:
+        """Which components the part prescribes."""
+        if self.role == "clamped":
+            return (True,) * dim
+        if self.role == "displacement":
+            return tuple(c is not None for c in self.displacement)
+        return (False,) * dim
+
+    def displacement_at(self, t: float, dim: int) -> tuple[float | None, ...]:
+        """Prescribed value of each component at time ``t`` (None: free)."""
+        if self.role == "clamped":
+            return (0.0,) * dim
+        return tuple(None if c is None else table_at(c, t)[0] for c in self.displacement)
+
+    @property
+    def inhomogeneous(self) -> bool:
+        """Whether a prescribed value differs from zero at some time (K's lifting then enters b)."""
+        return self.role == "displacement" and any(
+            c is not None and any(v != 0.0 for r in c for v in r[1:]) for c in self.displacement)
 
 
 def time_table(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[float, ...], ...]:
@@ -78,27 +133,39 @@ def time_table(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[float, ...],
 
 def parse(ctx: Ctx, t: Any, scene: dict) -> tuple[BoundaryConfig, ...]:
     mesh: MeshConfig = scene["mesh"]
+    dim = scene["dim"]
     if t is None:
         if mesh.kind != "rectangle":
             raise ctx.fail("boundary", "<missing>", "a gmsh scene must name its boundary parts")
         t = PAPER_BOUNDARIES
     if not isinstance(t, dict) or not t:
         raise ctx.fail("boundary", t, "must hold at least one [boundary.NAME] table")
-    out = [_part(ctx, name, b, mesh, scene["dim"]) for name, b in t.items()]
-    if not any(b.role == "clamped" for b in out):
-        raise ctx.fail("boundary", {b.name: 0 for b in out}, "needs a part with role = 'clamped' (else the body can float)")
+    out = [_part(ctx, name, b, mesh, dim) for name, b in t.items()]
+    _check_rigid_motions(ctx, out, dim)
     if mesh.kind == "rectangle":
         _check_overlaps(ctx, out, mesh)
     return tuple(out)
 
 
+def _check_rigid_motions(ctx: Ctx, parts: list[BoundaryConfig], dim: int) -> None:
+    """Every direction must be prescribed by some Dirichlet part (else the body translates freely).
+
+    Rotations are checked on the mesh (:func:`solver.operators.check_rigid_motions`).
+    """
+    for i, axis in enumerate(AXES[:dim]):
+        if not any(b.fixed(dim)[i] for b in parts):
+            raise ctx.fail("boundary", {b.name: 0 for b in parts},
+                           f"no part fixes u_{axis}: needs a part with role = 'clamped', or role = 'displacement' "
+                           f"with u_{axis} not 'free' (else the body can float)")
+
+
 def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryConfig:
     sec = f"boundary.{name}"
-    b = check_keys(ctx, sec, b, ("role", "side", "interval", "traction", "gap", "mu"))
+    b = check_keys(ctx, sec, b, _KEYS)
     if "role" not in b:
         raise ctx.fail(f"{sec}.role", "<missing>", "allowed: " + ", ".join(ROLES))
     role = string(ctx, f"{sec}.role", b["role"], ROLES)
-    for key in ("traction", "gap", "mu"):
+    for key in ("traction", "displacement", *_CONTACT_KEYS):
         if key in b and key not in _PER_ROLE[role]:
             raise ctx.fail(f"{sec}.{key}", b[key], f"not used by role '{role}'")
     side, interval = "", None
@@ -115,15 +182,102 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
         for key in ("side", "interval"):
             if key in b:
                 raise ctx.fail(f"{sec}.{key}", b[key], "only for built-in rectangles; gmsh parts are physical groups")
-    traction: tuple[tuple[float, ...], ...] = ()
+    part = BoundaryConfig(name, role, side, interval)
     if role == "traction":
         if "traction" not in b:
             raise ctx.fail(f"{sec}.traction", "<missing>", "a traction part needs a traction")
-        traction = time_table(ctx, f"{sec}.traction", b["traction"], dim)
-    gap = number(ctx, f"{sec}.gap", b.get("gap", 0.0))
-    mu = number(ctx, f"{sec}.mu", b.get("mu", 1e-10))
-    need(ctx, f"{sec}.mu", mu, mu > 0, "must be > 0 (deformability of the foundation)")
-    return BoundaryConfig(name, role, side, interval, traction, gap, mu)
+        return replace(part, traction=time_table(ctx, f"{sec}.traction", b["traction"], dim))
+    if role == "displacement":
+        return replace(part, displacement=_displacement(ctx, f"{sec}.displacement", b, dim))
+    if role == "contact":
+        return _contact(ctx, sec, b, part, mesh, dim)
+    return part
+
+
+def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, ...]:
+    """Per component: a number, a table of rows [t, value], or "free"; at least one component fixed."""
+    if "displacement" not in b:
+        raise ctx.fail(key, "<missing>", f"a displacement part needs displacement = [{', '.join(['u'] * dim)}]")
+    v = b["displacement"]
+    if not isinstance(v, list) or len(v) != dim:
+        raise ctx.fail(key, v, f"must list {dim} components, each a number, a table of rows [t, value] or 'free'")
+    comps: list[Table | None] = []
+    for i, c in enumerate(v):
+        ck = f"{key}[{i}]"
+        if c == FREE:
+            comps.append(None)
+        elif isinstance(c, list):
+            if not c or not all(isinstance(r, list) for r in c):
+                raise ctx.fail(ck, c, "a table must be rows [t, value] (or give a number, or 'free')")
+            comps.append(time_table(ctx, ck, c, 1))
+        elif isinstance(c, str):
+            raise ctx.fail(ck, c, "a number, a table of rows [t, value], or 'free'")
+        else:
+            comps.append(((0.0, number(ctx, ck, c)),))
+    if all(c is None for c in comps):
+        raise ctx.fail(key, v, "every component is 'free': give at least one value (or drop the part)")
+    return tuple(comps)
+
+
+def _contact(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig, dim: int) -> BoundaryConfig:
+    law = string(ctx, f"{sec}.law", b.get("law", "linear"), LAWS)
+    for key in ("mu", "coefficient", "exponent", "depth", "mu_stiff"):
+        if key in b and key not in _LAW_KEYS[law]:
+            raise ctx.fail(f"{sec}.{key}", b[key], f"not used by law '{law}' (it takes {', '.join(_LAW_KEYS[law])})")
+    values: dict[str, Any] = {"law": law}
+    if law in ("linear", "limited_penetration"):
+        if law == "limited_penetration" and "mu" not in b:
+            raise ctx.fail(f"{sec}.mu", "<missing>", "law 'limited_penetration' needs mu (the layer), depth")
+        mu = number(ctx, f"{sec}.mu", b.get("mu", 1e-10))
+        need(ctx, f"{sec}.mu", mu, mu > 0, "must be > 0 (deformability of the foundation)")
+        values["mu"] = mu
+    if law == "power":
+        for key in ("coefficient", "exponent"):
+            if key not in b:
+                raise ctx.fail(f"{sec}.{key}", "<missing>", "law 'power' needs coefficient c and exponent m: p(r) = c r_+^m")
+        c = number(ctx, f"{sec}.coefficient", b["coefficient"])
+        need(ctx, f"{sec}.coefficient", c, c > 0, "must be > 0")
+        m = number(ctx, f"{sec}.exponent", b["exponent"])
+        need(ctx, f"{sec}.exponent", m, m >= 1, "must be >= 1 (p monotone and C^1 for m > 1)")
+        values.update(coefficient=c, exponent=m)
+    if law == "limited_penetration":
+        if "depth" not in b:
+            raise ctx.fail(f"{sec}.depth", "<missing>", "law 'limited_penetration' needs depth (the layer's thickness)")
+        depth = number(ctx, f"{sec}.depth", b["depth"])
+        need(ctx, f"{sec}.depth", depth, depth > 0, "must be > 0")
+        mu_stiff = number(ctx, f"{sec}.mu_stiff", b.get("mu_stiff", 1e-10))
+        need(ctx, f"{sec}.mu_stiff", mu_stiff, 0 < mu_stiff <= values["mu"],
+             f"must be in (0, mu = {values['mu']}]: the foundation under the layer is the stiffer one")
+        values.update(depth=depth, mu_stiff=mu_stiff)
+    gap = b.get("gap", 0.0)
+    if isinstance(gap, list):
+        values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap)
+        values["gap_coordinate"] = _gap_coordinate(ctx, sec, b, part, mesh, dim)
+    else:
+        values["gap"] = number(ctx, f"{sec}.gap", gap)
+        if "gap_coordinate" in b:
+            raise ctx.fail(f"{sec}.gap_coordinate", b["gap_coordinate"], "only with a gap table [[s, g], ...]")
+    return replace(part, **values)
+
+
+def _gap_table(ctx: Ctx, key: str, v: list) -> tuple[tuple[float, float], ...]:
+    if not v or not all(isinstance(r, list) for r in v):
+        raise ctx.fail(key, v, "must be a number or a table of rows [s, g] (piecewise linear in s)")
+    rows = tuple(vector(ctx, f"{key}[{i}]", r, 2) for i, r in enumerate(v))
+    s = [r[0] for r in rows]
+    if any(b <= a for a, b in zip(s, s[1:])):
+        raise ctx.fail(key, s, "the coordinates s must increase strictly")
+    return rows  # type: ignore[return-value]
+
+
+def _gap_coordinate(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig, dim: int) -> str:
+    """x along a horizontal side, y along a vertical one; required on gmsh parts."""
+    if "gap_coordinate" in b:
+        return string(ctx, f"{sec}.gap_coordinate", b["gap_coordinate"], AXES[:dim])
+    if mesh.kind != "rectangle":
+        raise ctx.fail(f"{sec}.gap_coordinate", "<missing>",
+                       "a gap table on a gmsh part needs gap_coordinate = " + " | ".join(f"'{a}'" for a in AXES[:dim]))
+    return "x" if part.side in ("bottom", "top") else "y"
 
 
 def _check_overlaps(ctx: Ctx, parts: list[BoundaryConfig], mesh: MeshConfig) -> None:
@@ -151,7 +305,23 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
             entry["interval"] = list(b.interval)
         if b.role == "traction":
             entry["traction"] = [list(r) for r in b.traction]
+        if b.role == "displacement":
+            entry["displacement"] = [_component_toml(c) for c in b.displacement]
         if b.role == "contact":
-            entry["gap"], entry["mu"] = b.gap, b.mu
+            if b.gap_table:
+                entry["gap"], entry["gap_coordinate"] = [list(r) for r in b.gap_table], b.gap_coordinate
+            else:
+                entry["gap"] = b.gap
+            entry["law"] = b.law
+            for key in _LAW_KEYS[b.law]:
+                entry[key] = getattr(b, key)
         out[b.name] = entry
     return out
+
+
+def _component_toml(c: Table | None) -> Any:
+    if c is None:
+        return FREE
+    if len(c) == 1 and c[0][0] == 0.0:
+        return c[0][1]
+    return [list(r) for r in c]

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from .fields import Ctx, boolean, check_keys, integer, names, need, string
 
 # the fields a run can write (solver/outputs.py says what each is)
-FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic")
+FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz",
+               "elastic_stress_zz")  # the last two: plane strain only (sigma_33), skipped elsewhere
 # what a ParaView user needs to warp the body and colour it as the paper does; the two tensors
 # (6 values per cell each) triple the bytes per level and are written only on request
 DEFAULT_FIELDS = ("displacement", "damage", "von_mises", "von_mises_elastic")
@@ -18,7 +19,8 @@ PRECISIONS = ("double", "single")
 @dataclass(frozen=True)
 class OutputConfig:
     """Where and how often results are written (every=0: first and last only), which ``fields``
-    (``damage`` only where the scene has damage) in which ``precision``, and checkpoints every
+    (``damage`` only where the scene has damage, ``stress_zz``/``elastic_stress_zz`` only in plane strain) in
+    which ``precision``, and checkpoints every
     ``checkpoint_every`` steps (0: none)."""
 
     directory: str = "results"

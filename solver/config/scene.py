@@ -17,7 +17,8 @@ from typing import Any, NamedTuple
 import tomlkit
 
 from ..errors import ConfigError
-from . import boundary, damage, discretization, material, memory, mesh, output, solver, time
+from . import body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
+from .body_force import BodyForceConfig
 from .boundary import BoundaryConfig
 from .damage import DamageConfig
 from .discretization import DiscretizationConfig
@@ -43,6 +44,7 @@ class Section(NamedTuple):
 SECTIONS: tuple[Section, ...] = (
     Section("mesh", "mesh", mesh.parse, mesh.to_toml, {}),
     Section("boundary", "boundaries", boundary.parse, boundary.to_toml, None),
+    Section("body_force", "body_force", body_force.parse, body_force.to_toml, {}),
     Section("material", "material", material.parse, material.to_toml, {}),
     Section("discretization", "discretization", discretization.parse, discretization.to_toml, {}),
     Section("time", "time", time.parse, time.to_toml, {}),
@@ -59,6 +61,7 @@ class Config:
 
     mesh: MeshConfig = field(default_factory=MeshConfig)
     boundaries: tuple[BoundaryConfig, ...] = ()
+    body_force: BodyForceConfig = field(default_factory=BodyForceConfig)
     material: MaterialConfig = field(default_factory=MaterialConfig)
     discretization: DiscretizationConfig = field(default_factory=DiscretizationConfig)
     memory: MemoryConfig = field(default_factory=MemoryConfig)
@@ -84,6 +87,11 @@ class Config:
     @property
     def clamped(self) -> tuple[BoundaryConfig, ...]:
         return tuple(b for b in self.boundaries if b.role == "clamped")
+
+    @property
+    def dirichlet(self) -> tuple[BoundaryConfig, ...]:
+        """Parts that prescribe displacements: clamped and displacement."""
+        return tuple(b for b in self.boundaries if b.dirichlet)
 
 
 def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> Config:

@@ -55,6 +55,11 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
     has_contact = any(b.role == "contact" for b in scene["boundary"])
     if method != "newton" and has_contact and scene["dim"] != 2:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
+    power = [b.name for b in scene["boundary"] if b.role == "contact" and b.law == "power"]
+    if method == "penalty_duality" and power:
+        # its multiplier step needs the resolvent of p - omega I in closed form, and omega ~ a bound of p'
+        raise ctx.fail("solver.method", method, f"does not support law 'power' (boundary.{power[0]}): p' is unbounded, "
+                       "so no omega fits; use 'newton' or 'fixed_point'")
     if scene["memory"].rule == "trapezoid" and method != "newton" and has_contact:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:
