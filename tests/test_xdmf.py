@@ -185,7 +185,10 @@ def test_padding_and_chunks_grow_without_a_known_length(tmp_path, monkeypatch):
 
 
 def _crash(w: XDMFSeries) -> None:
-    """Drop a writer as a killed process would: files left as they are, nothing tidied."""
+    """Drop a writer as a killed process would once its background writes were done: files left as they are,
+    nothing tidied."""
+    if w._worker is not None:
+        w._worker.stop()
     for fd in (w.fd, w.chunk.fd if w.chunk else None):
         if fd is not None:
             os.close(fd)
