@@ -86,6 +86,7 @@ CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 MAX_LEVELS_PER_CHUNK = 100
 QUEUE_LEVELS = 4  # levels that may wait for the background writer (rank 0)
+FLUSH_CHUNKS = True  # see _retire
 CHUNK_BYTES = 256 * 2**20
 KILL_ENV = "SOLVER_TEST_KILL"  # test hooks: "stage:k" SIGKILLs this process inside its k-th write of stage,
 ENOSPC_ENV = "SOLVER_TEST_ENOSPC"  # or fails it there with OSError ENOSPC, as a full disk does (see _Hook)
@@ -327,6 +328,22 @@ def _pwrite_all(fd: int, data, offset: int) -> None:
         if n <= 0:
             raise OSError(28, "No space left on device (short write)")
         view, offset = view[n:], offset + n
+
+
+def _retire(fd: int) -> None:
+    """Close a full chunk after its pages are on disk and out of the page cache (background writer).
+
+    Otherwise the kernel keeps GBs of written pages dirty and writes them back late in a long
+    run, where its work slows the solver's memory-bound solves (measured: n = 128, 2,000
+    levels, the displacement solve 4.7 -> 6.6 ms per step by the end). Flushing each chunk as
+    it fills spreads that work evenly over the run.
+    """
+    try:
+        if FLUSH_CHUNKS:
+            os.fdatasync(fd)
+            os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+    finally:
+        os.close(fd)
 
 
 def _fmt_time(t: float) -> str:
@@ -644,7 +661,7 @@ class XDMFSeries:
     def _new_chunk(self, first: int) -> None:
         """Create ``levels_<first>.h5`` (a copy of the template's metadata) and keep it open for raw writes."""
         if self.chunk is not None:
-            os.close(self.chunk.fd)
+            _retire(self.chunk.fd)
             self.chunk = None
         template = self._template(self._chunk_slots(first))
         path = self.data_dir / f"levels_{first:06d}.h5"
