@@ -18,8 +18,10 @@ to the XML. Nothing already written is read, parsed or rewritten. HDF5 itself ma
 chunk per run (a template, about 35 us per dataset); every chunk file is a copy of the
 template's metadata bytes (a few us per level it holds).
 
-**In the background.** Those writes are done by one thread on rank 0, in the order they
-were asked for, while the solver computes the next levels (``pwrite`` releases the GIL).
+**In the background.** Levels of ``BACKGROUND_BYTES`` or more are written by one thread on
+rank 0, in the order they were asked for, while the solver computes the next levels
+(``pwrite`` releases the GIL); smaller ones are written at once, since handing them over costs
+more than writing them.
 Once the kernel holds a few GB of unwritten pages it makes ``pwrite`` wait for the disk
 (measured: 0.1 ms per MB at first, 0.6 ms after 2 GB); the thread takes that wait off
 the time loop. At most ``QUEUE_LEVELS`` levels wait for it (then ``write`` waits: the
@@ -86,6 +88,8 @@ CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 MAX_LEVELS_PER_CHUNK = 100
 QUEUE_LEVELS = 4  # levels that may wait for the background writer (rank 0)
+BACKGROUND_BYTES = 256 * 2**10  # levels of at least this size are written in the background (see _submit)
+BACKGROUND_ENV = "SOLVER_TEST_BACKGROUND"  # test hook: "1" writes every level in the background
 FLUSH_CHUNKS = True  # see _retire
 CHUNK_BYTES = 256 * 2**20
 KILL_ENV = "SOLVER_TEST_KILL"  # test hooks: "stage:k" SIGKILLs this process inside its k-th write of stage,
@@ -557,9 +561,17 @@ class XDMFSeries:
         self._collective(wait)
 
     def _submit(self, t: float, recv: np.ndarray) -> None:
-        """Rank 0: hand the level to the background writer (its values copied into file order first)."""
+        """Rank 0: write the level, or hand it to the background writer (values copied into file order first).
+
+        Small levels are written here: the thread's cost (the GIL passed back and forth, about
+        0.3 ms per level, measured at n = 32) exceeds their write, which never waits for the
+        disk long. Large ones go to the thread, whose ``pwrite`` may wait for the disk.
+        """
         self._raise_pending()
         fields = list(self._global(recv))  # new arrays: the caller may change its own after write() returns
+        if self._slot_bytes() < BACKGROUND_BYTES and os.environ.get(BACKGROUND_ENV) != "1":
+            self._write_level(t, fields)
+            return
         if self._worker is None:
             self._worker = _Worker()
         self._worker.submit(t, lambda: self._write_level(t, fields))

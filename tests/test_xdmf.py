@@ -88,8 +88,16 @@ def meshio_read(path: Path) -> dict:
     return out
 
 
+@pytest.fixture(params=["at-once", "background"])
+def writer_mode(request, monkeypatch):
+    """Small levels are written at once, large ones by the background thread: run a test both ways."""
+    if request.param == "background":
+        monkeypatch.setattr(sx, "BACKGROUND_BYTES", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("precision", ["double", "single"])
-def test_series_reads_back_in_meshio(comm, shared_tmp, precision):
+def test_series_reads_back_in_meshio(comm, shared_tmp, precision, writer_mode):
     """Serial and on 2 ranks: every time, every field, every value; NumberType and Precision on every DataItem."""
     scene = Scene(comm)
     times = [0.0, 0.25, 0.5, 0.75, 1.0]
@@ -134,7 +142,7 @@ def test_tensor6_order_in_3d(comm, shared_tmp):
 
 
 @pytest.mark.serial
-def test_every_byte_state_of_the_xml_is_valid(tmp_path):
+def test_every_byte_state_of_the_xml_is_valid(tmp_path, writer_mode):
     """Between any two bytes of an append, solution.xdmf parses and lists exactly the complete levels."""
     scene = Scene(MPI.COMM_SELF, n=2)
     w = scene.series(tmp_path, expected_levels=4)
@@ -165,7 +173,7 @@ def test_every_byte_state_of_the_xml_is_valid(tmp_path):
 
 
 @pytest.mark.serial
-def test_padding_and_chunks_grow_without_a_known_length(tmp_path, monkeypatch):
+def test_padding_and_chunks_grow_without_a_known_length(tmp_path, monkeypatch, writer_mode):
     """No expected length: the padding is renewed by rename when it runs out, chunks keep their size."""
     monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 7)
     scene = Scene(MPI.COMM_SELF, n=2)
@@ -196,7 +204,7 @@ def _crash(w: XDMFSeries) -> None:
 
 
 @pytest.mark.parametrize("closed", [True, False])
-def test_restart_keeps_levels_up_to_t_and_continues(comm, shared_tmp, monkeypatch, closed):
+def test_restart_keeps_levels_up_to_t_and_continues(comm, shared_tmp, monkeypatch, closed, writer_mode):
     monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
     scene = Scene(comm)
     first = [0.1 * i for i in range(8)]
@@ -305,6 +313,7 @@ sys.path.insert(0, {tests!r})
 import solver.xdmf as sx
 from test_xdmf import Scene
 sx.MAX_LEVELS_PER_CHUNK = 4
+sx.BACKGROUND_BYTES = {background}
 out, keep = sys.argv[1], (float(sys.argv[2]) if len(sys.argv) > 2 else None)
 times = [0.1 * i for i in range(12)]
 if keep is not None:
@@ -332,9 +341,10 @@ def _run(script: Path, args: list[str], nproc: int, env: dict) -> subprocess.Com
     ("chunk", 2, 4, 1),  # inside the creation of the second chunk (levels 4-7)
     ("data", 9, 8, 2),  # 2 ranks, rank 0 killed inside a data write
 ])
-def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc):
+@pytest.mark.parametrize("background", [False, True], ids=["at-once", "background"])
+def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc, background):
     script = tmp_path / "killed.py"
-    script.write_text(KILLED.format(tests=str(ROOT / "tests")))
+    script.write_text(KILLED.format(tests=str(ROOT / "tests"), background=0 if background else 2**40))
     out = tmp_path / "out"
     env = dict(mpi_env(), PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     res = _run(script, [str(out)], nproc, dict(env, SOLVER_TEST_KILL=f"{stage}:{at}"))
