@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 
 import basix
+import dolfinx.fem.petsc  # noqa: F401  (fem.petsc)
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -173,6 +174,46 @@ class MemorySource:
             return flat
         out[:] = flat
         return out
+
+
+class MemoryForce:
+    """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one sparse product.
+
+    Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
+    P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
+    at n = 64, measured; a third of the step). It is also G^T W: the source's strain operator
+    G (eps at the points from u's dofs, built once) transposed, with W the weight w_q |J_K|
+    of each point of an owned cell (0 on ghost cells, whose owners add their part). So B M
+    is G^T (W M): G has fewer entries (the symmetric halves merged), and the product runs in
+    scipy on the local arrays, followed by one reverse scatter. Equal to B M to round-off
+    (tested).
+    """
+
+    def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
+        import scipy.sparse as sp
+
+        mesh = rule.mesh
+        d = source.d
+        tdim = mesh.topology.dim
+        n_owned = mesh.topology.index_map(tdim).size_local
+        npts = rule.points.shape[0]
+        S0 = fem.FunctionSpace(mesh, ("DG", 0))
+        vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # owned cell volumes
+        cell_dofs = S0.dofmap.list.array[:n_owned]
+        # |J_K| = vol_K / (reference volume), the reference volume being the sum of the weights
+        weights = np.outer(vol.array_r[cell_dofs], rule.weights / rule.weights.sum())  # (owned cell, point)
+        vol.destroy()
+        size_q = source.Q.dofmap.index_map.size_local + source.Q.dofmap.index_map.num_ghosts
+        nodes = source.Q.dofmap.list.array.reshape(-1, npts)[:n_owned]
+        w = np.zeros(size_q)
+        w[nodes.ravel()] = weights.ravel()
+        self.GW = (source.G.T @ sp.diags(np.repeat(w, d * d))).tocsr()
+
+    def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
+        """out = B M (owned entries; ``out`` a ghosted vector of u's space)."""
+        with out.localForm() as local:
+            local.array[:] = self.GW @ M.x.array
+        out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
 
 class OutOfPlaneSource:

@@ -26,6 +26,7 @@ from .config import BodyForceConfig, BoundaryConfig, MaterialConfig
 from .errors import RigidMotionError
 from .geometry import Geometry
 from .material import elasticity, strain
+from .memory import MemoryForce, MemorySource
 
 
 def assemble_without_diagonal(M: PETSc.Mat, form, bcs) -> None:
@@ -172,10 +173,15 @@ class Operators:
             L = L + ufl.inner(self.f0, self.w) * ufl.dx
         self.L = fem.form(L)
         self.history = history
-        self.B = None
+        self.B = None  # the assembled memory coupling, where the history's source has no strain operator
+        self._memory_force: MemoryForce | None = None
         if history is not None:
-            self.B = fpetsc.assemble_matrix(fem.form(history.coupling(self.w)))
-            self.B.assemble()
+            source = history.H
+            if isinstance(source, MemorySource):
+                self._memory_force = MemoryForce(history.rule, source)
+            else:
+                self.B = fpetsc.assemble_matrix(fem.form(history.coupling(self.w)))
+                self.B.assemble()
 
         self.bulk = ufl.inner(elasticity(strain(self.du), material.E, material.nu, material.model),
                               strain(self.w)) * ufl.dx
@@ -194,7 +200,7 @@ class Operators:
     @property
     def memory_force(self) -> PETSc.Vec | None:
         """B M_n of the last :meth:`assemble_rhs` (None without memory)."""
-        return self._work if self.B is not None else None
+        return self._work if self.history is not None else None
 
     def assemble_rhs(self, t: float) -> None:
         """b_n: loads at t, minus the memory term B M_n and the Dirichlet lifting K_{.D} g_n; g_n on the
@@ -210,7 +216,10 @@ class Operators:
         fpetsc.assemble_vector(self.b, self.L)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.b.copy(self.loads)
-        if self.B is not None:
+        if self._memory_force is not None:
+            self._memory_force(self.history.M, self._work)
+            self.b.axpy(-1.0, self._work)
+        elif self.B is not None:
             self.B.mult(self.history.M.vector, self._work)
             self.b.axpy(-1.0, self._work)
         if self.dirichlet.inhomogeneous:

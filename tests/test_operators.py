@@ -158,3 +158,24 @@ def test_rotation_left_free_by_the_dirichlet_parts_is_named(comm):
         build_model(cfg, comm)
     assert err.value.motions == ["rotation about (0, 0)"] and err.value.status == "singular"
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("extra", [{}, {"discretization": {"u_degree": 2}, "time": {"order": 2}}], ids=["P1", "P2-order2"])
+def test_memory_force_is_the_assembled_coupling(comm, extra):
+    """B M through the strain operator (G^T W M) equals the assembled (M, eps(w)) to round-off, for a
+    memory tensor that is not symmetric and differs on every point."""
+    from dolfinx import fem
+    from dolfinx.fem import petsc as fpetsc
+
+    model = _model(comm, **extra)
+    ops = model.mech.ops
+    M = model.history.M
+    M.x.array[:] = np.sin(np.arange(M.x.array.size) + 1000.0 * comm.rank)
+    M.x.scatter_forward()
+    B = fpetsc.assemble_matrix(fem.form(model.history.coupling(ops.w)))
+    B.assemble()
+    want, got = ops.b.duplicate(), ops.b.duplicate()
+    B.mult(M.vector, want)
+    ops._memory_force(M, got)
+    got.axpy(-1.0, want)
+    assert got.norm() <= 1e-13 * want.norm() and want.norm() > 0
