@@ -62,7 +62,7 @@ def scheme_fingerprint() -> str:
     """A hash of the solver's physics sources: a cached solution is reused only by the code that computed it."""
     here = Path(__file__).resolve().parent
     skip = {"bench.py", "study.py", "plots.py", "paraview.py", "paraview_script.py", "post.py", "cli.py",
-            "discretizations.py", "reference.py", "convergence.py"}
+            "discretizations.py", "reference.py", "convergence.py", "estimator.py", "estimator_study.py"}
     h = hashlib.sha256()
     for path in sorted(here.rglob("*.py")):
         if path.name not in skip:

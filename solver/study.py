@@ -346,6 +346,13 @@ def orders(args) -> int:
     return 0
 
 
+def estimator(args) -> int:
+    """The residual estimator's calibration at t = 0, to estimator.md and estimator.json."""
+    from . import estimator_study
+
+    return estimator_study.run(SCENES["example1"], Path(args.output), args.ref_n, args.p1, args.p2)
+
+
 def _quiet() -> None:
     """Worker processes: the form compiler's build chatter off, as in the CLI."""
     import logging
@@ -401,5 +408,11 @@ def main(argv: list[str] | None = None) -> int:
     wp.add_argument("--ks", type=float, nargs="+", default=[0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001])
     wp.add_argument("--ns", type=int, nargs="+", default=[8, 16, 32, 64])
     wp.add_argument("--methods", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    es = sub.add_parser("estimator", help="calibrate the residual estimator at t = 0 (Example 1)")
+    es.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
+    es.add_argument("--ref-n", type=int, default=256, help="mesh of the P2 reference")
+    es.add_argument("--p1", type=int, nargs="*", default=[8, 16, 32, 64, 128])
+    es.add_argument("--p2", type=int, nargs="*", default=[8, 16, 32, 64])
     args = p.parse_args(argv)
-    return {"stability": stability, "work-precision": work_precision, "orders": orders}[args.which](args)
+    return {"stability": stability, "work-precision": work_precision, "orders": orders,
+            "estimator": estimator}[args.which](args)

@@ -1,0 +1,120 @@
+"""A posteriori estimate of the displacement error of a level, residual based, cell by cell.
+
+For the displacement problem of a level (docs/model.md §3.2: elasticity, the memory stress
+M, the body force f, tractions t on Γ_N and the normal compliance p on Γ_C), with
+σ_h = A ε(u_h) + M, the classical residual estimator is
+
+    η_K² = h_K² ‖div σ_h + f‖²_K + ½ Σ_{E ⊂ ∂K interior} h_E ‖[σ_h n]‖²_E
+           + Σ_{E ⊂ ∂K ∩ Γ_N} h_E ‖σ_h n − t‖²_E + Σ_{E ⊂ ∂K ∩ Γ_C} h_E ‖σ_h n + p(u_ν − g) ν‖²_E
+           + Σ_{E ⊂ ∂K free} h_E ‖σ_h n‖²_E,
+
+and ‖ε(u − u_h)‖ ≤ C η with a constant C that the theory leaves open: it is measured
+(calibrated) against the error of solutions whose reference is known, not assumed.
+
+The estimate is assembled as one vector against the piecewise constants (one test function
+per cell), so that η_K² comes out per cell in one assembly, in parallel as in serial. The
+memory stress M lives at quadrature points and cannot be evaluated on facets, so only its
+cell term enters (it is zero at t = 0, where the estimate is first used, and piecewise
+constant for P1, where it has no divergence either).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from .config import BoundaryConfig, MaterialConfig
+from .contact import compliance, gap_function, penetration
+from .geometry import Geometry
+from .material import elasticity, strain
+
+
+class ResidualEstimator:
+    """η_K² of the displacement ``u`` on every owned cell (:meth:`cells`) and η (:meth:`total`).
+
+    ``loads`` gives, per traction part, the traction constant the operators update each level
+    (so the estimate is that of the level just solved); clamped and displacement parts carry
+    no residual.
+    """
+
+    def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
+                 boundaries: tuple[BoundaryConfig, ...], tractions: dict[str, fem.Constant], degree: int,
+                 body_force: fem.Constant | None = None) -> None:
+        mesh = geo.mesh
+        self.geo = geo
+        V0 = fem.FunctionSpace(mesh, ("DG", 0))
+        v = ufl.TestFunction(V0)
+        n = ufl.FacetNormal(mesh)
+        h = ufl.CellDiameter(mesh)
+        sigma = elasticity(strain(u), material.E, material.nu, material.model)
+        md = {"quadrature_degree": degree}
+        dx, dS = ufl.dx(metadata=md), ufl.dS(metadata=md)
+
+        div_term = None
+        if u.function_space.ufl_element().degree() > 1 or body_force is not None:  # P1: div sigma_h = 0 in a cell
+            R = ufl.div(sigma) if body_force is None else ufl.div(sigma) + body_force
+            div_term = h**2 * ufl.inner(R, R) * v * dx
+        jump = ufl.jump(sigma, n)
+        interior = ufl.avg(h) * ufl.inner(jump, jump) * ufl.avg(v) * dS
+        form = interior if div_term is None else interior + div_term
+
+        # exterior facets: everywhere sigma n, then each tagged part replaces its share by its own residual
+        traction = ufl.dot(sigma, n)
+        form = form + h * ufl.inner(traction, traction) * v * ufl.ds(metadata=md)
+        for part in boundaries:
+            ds = geo.ds(geo.tags[part.name], metadata=md)
+            form = form - h * ufl.inner(traction, traction) * v * ds
+            if part.role == "traction":
+                r = traction - tractions[part.name]
+            elif part.role == "contact":
+                r = traction + compliance(penetration(u, n, gap_function(part, mesh)), part) * n
+            else:  # Dirichlet: no residual
+                continue
+            form = form + h * ufl.inner(r, r) * v * ds
+        self.form = fem.form(form)
+        self.vec = fpetsc.create_vector(self.form)
+        n_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+        self.cell_dofs = V0.dofmap.list.array[:n_cells]  # one dof per cell (owned cells own their dof)
+
+    def cells(self) -> np.ndarray:
+        """η_K² of the owned cells, in the mesh's local cell order."""
+        with self.vec.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(self.vec, self.form)
+        self.vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return np.maximum(self.vec.array_r[self.cell_dofs], 0.0)
+
+    def total(self, eta2: np.ndarray | None = None) -> float:
+        """η = (Σ_K η_K²)^{1/2} over all ranks."""
+        eta2 = self.cells() if eta2 is None else eta2
+        return float(np.sqrt(self.geo.comm.allreduce(float(eta2.sum()), op=MPI.SUM)))
+
+
+def estimator_for(model) -> ResidualEstimator:
+    """The estimator of a built model's displacement problem (its tractions as the operators hold them)."""
+    cfg = model.cfg
+    ops = model.mech.ops
+    tractions = {part.name: f for part, f in ops.tractions}
+    degree = 2 * cfg.discretization.u_degree + 2
+    body_force = ops.f0 if ops.body_force is not None else None
+    return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force)
+
+
+def dorfler(eta2: np.ndarray, theta: float, comm: MPI.Comm) -> np.ndarray:
+    """Dörfler marking: the owned cells (a boolean mask) with the largest η_K² whose sum is at least
+    θ Σ η_K², over all ranks (a global threshold found by bisection on the value)."""
+    total = comm.allreduce(float(eta2.sum()), op=MPI.SUM)
+    if total == 0.0:
+        return np.zeros(len(eta2), dtype=bool)
+    lo, hi = 0.0, comm.allreduce(float(eta2.max(initial=0.0)), op=MPI.MAX)
+    for _ in range(60):  # the largest threshold whose cells above it carry theta of the total
+        mid = 0.5 * (lo + hi)
+        if comm.allreduce(float(eta2[eta2 >= mid].sum()), op=MPI.SUM) >= theta * total:
+            lo = mid
+        else:
+            hi = mid
+    return eta2 >= lo

@@ -1,0 +1,105 @@
+"""Calibration of the residual estimator (solver/estimator.py) on Example 1's t = 0 problem.
+
+The elastic contact problem at t = 0 is solved on uniform meshes with P1 and P2 and
+compared with a P2 solution on a much finer mesh of the same family (nested, so the
+coarse solutions are interpolated onto it exactly). For each run the study records the
+estimate η, the error ‖ε(u_ref − u_h)‖, their ratio C = error / η (the constant the
+tolerance control will use, per degree), the observed rates in h of both, and where η²
+sits: the share within r < 0.1 of the corners (1, 0) (loaded edge meets the contact edge)
+and (1, 1) (loaded edge meets the free top).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+CORNERS = {"(1, 0)": (1.0, 0.0), "(1, 1)": (1.0, 1.0)}
+
+
+def _level0(cfg_path: Path, n: int, degree: int):
+    from mpi4py import MPI
+
+    from .config import load
+    from .stepper import Stepper, build_model
+
+    cfg = load(cfg_path, [f"mesh.nx={n}", f"mesh.ny={n}", "time.k=1.0", "time.T=1.0", "output.xdmf=false",
+                          f"discretization.u_degree={degree}"])
+    model = build_model(cfg, MPI.COMM_SELF)
+    Stepper(model).step(0)
+    return model
+
+
+def calibrate(cfg_path: Path, runs: list[tuple[int, int]], ref_n: int, log=print) -> dict:
+    """η and the error at t = 0 for every (degree, n) of ``runs`` against a P2 solve at ``ref_n``."""
+    import ufl
+    from dolfinx import fem
+    from dolfinx.fem import petsc as fpetsc
+
+    from .estimator import estimator_for
+    from .reference import _petsc_to_scipy, interpolation_matrix
+
+    ref = _level0(cfg_path, ref_n, 2)
+    V = ref.u.function_space
+    du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+    E = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))) * ufl.dx))
+    E.assemble()
+    E = _petsc_to_scipy(E)
+    points = V.tabulate_dof_coordinates()[:, :2]
+    u_ref = ref.u.x.array.copy()
+    ref_estimate = estimator_for(ref).total()
+    log(f"reference P2 n={ref_n}: eta = {ref_estimate:.4g}")
+    rows = []
+    for degree, n in runs:
+        model = _level0(cfg_path, n, degree)
+        est = estimator_for(model)
+        eta2 = est.cells()
+        eta = est.total(eta2)
+        P = interpolation_matrix(model.u.function_space, points)
+        e = u_ref - (P @ model.u.x.array.reshape(-1, 2)).ravel()
+        error = float(np.sqrt(max(e @ (E @ e), 0.0)))
+        mesh = model.geo.mesh
+        centres = _cell_centres(mesh, len(eta2))
+        shares = {name: float(eta2[np.hypot(*(centres - np.array(c)).T) < 0.1].sum() / eta2.sum())
+                  for name, c in CORNERS.items()}
+        rows.append({"degree": degree, "n": n, "dofs": int(model.u.x.array.size), "eta": eta, "error": error,
+                     "C": error / eta, "share_near": shares})
+        log(f"P{degree} n={n:4d}: eta {eta:.4e}  error {error:.4e}  C = error/eta {error / eta:.4e}  "
+            + "  ".join(f"eta^2 near {k}: {v:.2f}" for k, v in shares.items()))
+    for degree in sorted({r["degree"] for r in rows}):
+        mine = [r for r in rows if r["degree"] == degree]
+        for a, b in zip(mine, mine[1:]):
+            b["rate_eta"] = float(np.log(a["eta"] / b["eta"]) / np.log(b["n"] / a["n"]))
+            b["rate_error"] = float(np.log(a["error"] / b["error"]) / np.log(b["n"] / a["n"]))
+    return {"reference": {"degree": 2, "n": ref_n, "eta": ref_estimate}, "runs": rows}
+
+
+def _cell_centres(mesh, n_cells: int) -> np.ndarray:
+    x = mesh.geometry.x[:, :2]
+    nodes = mesh.geometry.dofmap.array.reshape(-1, mesh.topology.dim + 1)[:n_cells]
+    return x[nodes].mean(axis=1)
+
+
+def markdown(result: dict) -> str:
+    ref = result["reference"]
+    lines = [f"## Residual estimator at t = 0 (Example 1), against P2 at n = {ref['n']}", "",
+             "| space | n | u dofs | eta | error ‖ε(u_ref − u_h)‖ | C = error / eta | rate eta | rate error "
+             "| eta² near (1, 0) | eta² near (1, 1) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in result["runs"]:
+        rate = (f"{r['rate_eta']:.2f} | {r['rate_error']:.2f}" if "rate_eta" in r else "— | —")
+        lines.append(f"| P{r['degree']} | {r['n']} | {r['dofs']} | {r['eta']:.4e} | {r['error']:.4e} | {r['C']:.4e} "
+                     f"| {rate} | {r['share_near']['(1, 0)']:.2f} | {r['share_near']['(1, 1)']:.2f} |")
+    lines += ["", "Near: cell centres within r < 0.1 of the corner. The reference's own estimate: "
+              f"eta = {ref['eta']:.4e}.", ""]
+    return "\n".join(lines)
+
+
+def run(cfg_path: Path, out: Path, ref_n: int, p1: list[int], p2: list[int]) -> int:
+    out.mkdir(parents=True, exist_ok=True)
+    result = calibrate(cfg_path, [(1, n) for n in p1] + [(2, n) for n in p2], ref_n)
+    (out / "estimator.json").write_text(json.dumps(result, indent=1))
+    (out / "estimator.md").write_text(markdown(result))
+    print(markdown(result))
+    return 0
