@@ -64,9 +64,10 @@ class Model:
         return self.geo.comm
 
 
-def build_model(cfg: Config, comm: MPI.Comm) -> Model:
-    """Mesh, spaces and the physics terms the scene switches on."""
-    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Model:
+    """Mesh, spaces and the physics terms the scene switches on (``geo``: a mesh already made, e.g. refined,
+    instead of the scene's)."""
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim) if geo is None else geo
     mesh = geo.mesh
     disc = cfg.discretization
     V = fem.VectorFunctionSpace(mesh, ("CG", disc.u_degree))

@@ -1,0 +1,72 @@
+"""Local refinement keeps the scene's named boundary parts: on the built-in rectangle and on a gmsh mesh,
+serially and on 2 ranks; and the adapted meshes beat uniform ones at t = 0 (Example 1)."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from mpi4py import MPI
+
+from solver.adapt import refine
+from solver.config import load
+from solver.estimator import dorfler, estimator_for
+from solver.geometry import build
+from solver.stepper import Stepper, build_model
+
+
+def _lengths(geo, names):
+    return {name: geo.measure(name) for name in names}
+
+
+def _corner_cells(geo, corner, radius):
+    mesh = geo.mesh
+    n = mesh.topology.index_map(2).size_local
+    nodes = mesh.geometry.dofmap.array.reshape(-1, 3)[:n]
+    centres = mesh.geometry.x[nodes][:, :, :2].mean(axis=1)
+    return np.flatnonzero(np.hypot(*(centres - np.array(corner)).T) < radius)
+
+
+@pytest.mark.parametrize("scene,corner", [("example1.toml", (1.0, 0.0)), ("example2.toml", (0.0, 1.0))])
+def test_refinement_keeps_every_part(comm, scene, corner):
+    cfg = load(ROOT / "configs" / scene)
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    names = [p.name for p in cfg.boundaries]
+    before = _lengths(geo, names)
+    cells = geo.num_cells()
+    for _ in range(3):  # three times around a corner where a part ends
+        geo = refine(geo, _corner_cells(geo, corner, 0.3))
+    assert geo.num_cells() > cells
+    assert _lengths(geo, names) == pytest.approx(before, rel=1e-12)
+    # every tagged facet lies on its part: its midpoint is on the old part's facets (lengths equal and facets only
+    # on the boundary: an interior facet wrongly tagged would add length)
+    fdim = 1
+    geo.mesh.topology.create_connectivity(fdim, 2)
+    f2c = geo.mesh.topology.connectivity(fdim, 2)
+    assert all(len(f2c.links(f)) == 1 for f in geo.facet_tags.indices if f < geo.mesh.topology.index_map(fdim).size_local)
+
+
+def test_adapted_meshes_beat_uniform_ones_at_t0(comm):
+    """Example 1's t = 0 problem, P1: four Dörfler steps from n = 8 give a smaller estimate than the uniform
+    n = 32 mesh with fewer cells; the same numbers on 2 ranks as serially."""
+    cfg = load(ROOT / "configs" / "example1.toml", ["mesh.nx=8", "mesh.ny=8", "time.k=1.0", "time.T=1.0"])
+    geo = None
+    for _ in range(5):
+        model = build_model(cfg, comm, geo)
+        Stepper(model).step(0)
+        eta2 = estimator_for(model).cells()
+        geo = refine(model.geo, np.flatnonzero(dorfler(eta2, 0.5, comm)))
+    adapted_cells, adapted_eta = model.geo.num_cells(), estimator_for(model).total()
+    uniform = load(ROOT / "configs" / "example1.toml", ["mesh.nx=32", "mesh.ny=32", "time.k=1.0", "time.T=1.0"])
+    model32 = build_model(uniform, comm)
+    Stepper(model32).step(0)
+    assert adapted_cells < model32.geo.num_cells() and adapted_eta < estimator_for(model32).total()
+    serial = comm.allgather(adapted_eta)
+    assert max(serial) == min(serial)
+    if comm.size > 1:  # against a one-process run of the same loop
+        geo = None
+        for _ in range(5):
+            m = build_model(cfg, MPI.COMM_SELF, geo)
+            Stepper(m).step(0)
+            e2 = estimator_for(m).cells()
+            geo = refine(m.geo, np.flatnonzero(dorfler(e2, 0.5, MPI.COMM_SELF)))
+        assert m.geo.num_cells() == adapted_cells
+        assert estimator_for(m).total() == pytest.approx(adapted_eta, rel=1e-9)
