@@ -14,9 +14,12 @@
 #   docker run --rm -v "$PWD/out:/out" --entrypoint mpirun campo-solver \
 #       -n 2 python -m solver run configs/example1.toml --output /out/ex1
 # Own scenes: mount them too, e.g. -v "$PWD/scenes:/scenes" ... run /scenes/my.toml --output /out/my
-# The output folder must be writable by uid 1000, or run as yourself with
-#   --user "$(id -u):$(id -g)" -e XDG_CACHE_HOME=/tmp/cache
-# (the form cache in /home/solver is uid 1000's; forms then compile again on first use).
+# The output folder must be writable by uid 1000, or run as yourself with --user "$(id -u):$(id -g)"
+# (any uid, root included: mpirun is allowed to run as root, and the compiled-form cache is shared).
+# A slim image without the plotting stack (no matplotlib, pyvista/VTK; `plot` says so):
+#   docker build --build-arg PLOTS=0 -t campo-solver:slim .
+# Behind a TLS-intercepting proxy, give its CA certificate (PEM) to the build:
+#   docker build --build-arg EXTRA_CA_CERT="$(cat proxy-ca.pem)" -t campo-solver .
 # Tests inside the image:
 #   docker run --rm --entrypoint python campo-solver -m pytest -q -m "not slow"
 #
@@ -26,17 +29,24 @@
 FROM debian:bookworm
 
 ARG DEBIAN_FRONTEND=noninteractive
+# PLOTS=0: no plotting stack (see the Makefile); EXTRA_CA_CERT: a CA certificate (PEM text) to trust,
+# for builds behind a TLS-intercepting proxy (apt and pip both use the system store then)
+ARG PLOTS=1
+ARG EXTRA_CA_CERT=""
 
 # make runs the Makefile; ca-certificates lets pip reach PyPI over https
 RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends make ca-certificates \
- && rm -rf /var/lib/apt/lists/*
+ && rm -rf /var/lib/apt/lists/* \
+ && if [ -n "$EXTRA_CA_CERT" ]; then \
+        printf '%s\n' "$EXTRA_CA_CERT" > /usr/local/share/ca-certificates/extra-ca.crt && update-ca-certificates; \
+    fi
 
 WORKDIR /opt/solver
 
 # Debian packages first (a layer that only changes with the Makefile)
 COPY Makefile ./
-RUN make system-packages \
+RUN make system-packages PLOTS=$PLOTS \
  && rm -rf /var/lib/apt/lists/*
 
 RUN useradd --create-home --uid 1000 --user-group --shell /bin/bash solver \
@@ -46,15 +56,20 @@ COPY --chown=solver:solver . /opt/solver
 
 USER solver
 ENV HOME=/home/solver \
+    XDG_CACHE_HOME=/home/solver/.cache \
     PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    PIP_CERT=/etc/ssl/certs/ca-certificates.crt \
     PYTHONUNBUFFERED=1
 # the virtual environment /opt/solver/.venv, then the project in it (editable, with [dev] for pytest)
-RUN make install
+RUN make install PLOTS=$PLOTS
 
+# mpirun refuses root unless told: `--user 0:0` (a root host user) must work like any other uid
 ENV PATH=/opt/solver/.venv/bin:$PATH \
     OMPI_MCA_rmaps_base_oversubscribe=1 \
-    OMPI_MCA_btl_vader_single_copy_mechanism=none
+    OMPI_MCA_btl_vader_single_copy_mechanism=none \
+    OMPI_ALLOW_RUN_AS_ROOT=1 \
+    OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 
 # Compile the forms of the example scenes now (into /home/solver/.cache/fenics), so that a
 # first run doesn't: two steps of each (k is a constant in the forms, so any k reuses them).
@@ -62,7 +77,8 @@ RUN for scene in configs/example*.toml; do \
         python -m solver run "$scene" --set time.T=0.02 --no-progress \
             --output "/tmp/precompile/$(basename "$scene" .toml)" || exit 1; \
     done \
- && rm -rf /tmp/precompile
+ && rm -rf /tmp/precompile \
+ && chmod -R a+rwX /home/solver/.cache
 
 ENTRYPOINT ["python", "-m", "solver"]
 CMD ["--help"]

@@ -7,7 +7,16 @@
 
 SHELL := /bin/bash
 PY := .venv/bin/python
-APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-tomlkit python3-scipy python3-matplotlib python3-venv python3-pip openmpi-bin libegl1 libegl-mesa0
+# PLOTS=0 leaves out the plotting stack (matplotlib, pyvista/VTK and the EGL it renders with off-screen):
+# runs, studies and tests work without it; `solver plot` and the charts then say what is missing
+PLOTS ?= 1
+APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-tomlkit python3-scipy python3-venv python3-pip openmpi-bin
+ifeq ($(PLOTS),1)
+APT_PACKAGES += python3-matplotlib libegl1 libegl-mesa0
+EXTRAS := dev,plots
+else
+EXTRAS := dev
+endif
 export OMPI_ALLOW_RUN_AS_ROOT := 1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMPI_MCA_rmaps_base_oversubscribe := 1
@@ -30,7 +39,7 @@ system-packages:
 	@[ -x $(PY) ] || /usr/bin/python3 -m venv --system-site-packages .venv
 	@/usr/bin/python3 -c 'import numpy; print("numpy==" + numpy.__version__)' > .venv/constraints.txt
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -c .venv/constraints.txt -e ".[dev]"
+	$(PY) -m pip install -q -c .venv/constraints.txt -e ".[$(EXTRAS)]"
 	@touch $@
 
 demo: install

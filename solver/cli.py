@@ -8,6 +8,7 @@ without ``--overwrite``.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import logging
 import sys
 from pathlib import Path
@@ -178,6 +179,13 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     return 0
 
 
+def _installed(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ValueError:  # already imported as None (how a test hides a module)
+        return False
+
+
 def main(argv: list[str] | None = None) -> int:
     comm = MPI.COMM_WORLD
     argv = sys.argv[1:] if argv is None else argv
@@ -191,6 +199,12 @@ def main(argv: list[str] | None = None) -> int:
 
         return paraview_main(argv[1:])
     if argv[:1] == ["plot"]:
+        missing = [m for m in ("matplotlib", "pyvista") if not _installed(m)]
+        if missing:
+            print(f"error: plot needs {' and '.join(missing)}, which this installation leaves out (a slim image, or "
+                  "make install PLOTS=0): install the plotting extra (make install PLOTS=1), or plot with the full "
+                  "image", file=sys.stderr)
+            return 2
         from .plots import main as plot_main
 
         return plot_main(argv[1:])

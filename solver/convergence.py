@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from .charts import pyplot
 from .errors import SolveFailure
 
 PAPER_NS = (4, 8, 16, 32, 64, 128)
@@ -339,11 +340,9 @@ def write(rows: list[dict], info: dict, out: Path, title: str) -> None:
     (out / "table1.md").write_text("\n".join(md))
     (out / "rates.json").write_text(json.dumps(rt, indent=1))
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot("the convergence chart")
+    if plt is None:
+        return
     fig, ax = plt.subplots(figsize=(6, 4.5))
     x = np.array([1 / r["n"] + r["k"] for r in rows])
     ax.loglog(x, [r["error"] for r in rows], "o", label="this code")

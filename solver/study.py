@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .charts import pyplot
 from .errors import SolveFailure
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,10 +103,9 @@ def _write_csv(rows: list[dict], path: Path) -> None:
 
 
 def _heatmaps(rows: list[dict], out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot("the stability maps")
+    if plt is None:
+        return []
     from matplotlib.colors import LogNorm
 
     made = []
@@ -260,11 +260,6 @@ def _discretizations_part(args, out: Path) -> tuple[list[dict], dict]:
 
 def work_precision(args) -> int:
     """Methods (against the P1 reference) and discretizations (against the P2 / order 2 reference), one chart."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     if "methods" in args.parts:
@@ -276,6 +271,9 @@ def work_precision(args) -> int:
     else:
         disc = _read_rows(out / "work_precision_discretizations.csv")
         info = json.loads((out / "work_precision_reference.json").read_text())
+    plt = pyplot("the work-precision chart")
+    if plt is None:
+        return 0
     ok = [r for r in rows if r["status"] == "converged"]
     failed = sorted({r["method"] for r in rows if r["status"] != "converged"})
     fig, axes = plt.subplots(1, 3, figsize=(19, 5.4))

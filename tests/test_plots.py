@@ -10,9 +10,29 @@ from conftest import ROOT
 
 pytestmark = pytest.mark.serial  # starts its own processes
 
+HIDE = "import sys; sys.modules['{m}'] = None; from solver.cli import main; sys.exit(main({argv!r}))"
+
+
+@pytest.mark.parametrize("module", ["pyvista", "matplotlib"])
+def test_plot_without_the_plotting_extra_is_one_line(module, tmp_path):
+    """A slim installation (make install PLOTS=0) has no plotting stack: plot says what is missing, exit 2."""
+    res = subprocess.run([sys.executable, "-c", HIDE.format(m=module, argv=["plot", str(tmp_path)])], cwd=ROOT,
+                         capture_output=True, text=True)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "Traceback" not in res.stderr
+    assert res.stderr.startswith("error: plot needs ") and module in res.stderr and "PLOTS=1" in res.stderr
+
+
+def test_charts_are_skipped_without_matplotlib(capsys, monkeypatch):
+    from solver.charts import pyplot
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    assert pyplot("the chart") is None
+    assert "the chart skipped: matplotlib is not installed" in capsys.readouterr().out
+
 
 @pytest.mark.slow
 def test_plot_writes_pictures(tmp_path):
+    pytest.importorskip("pyvista", reason="the plotting extra is not installed (make install PLOTS=0)")
     env = dict(os.environ)
     out = tmp_path / "r"
     run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
@@ -33,6 +53,7 @@ def test_plot_writes_pictures(tmp_path):
 
 
 def test_plot_refuses_a_non_results_directory(tmp_path):
+    pytest.importorskip("pyvista", reason="the plotting extra is not installed (make install PLOTS=0)")
     res = subprocess.run([sys.executable, "-m", "solver", "plot", str(tmp_path)], cwd=ROOT, capture_output=True,
                          text=True)
     assert res.returncode != 0 and "no solution.xdmf" in res.stderr
