@@ -16,7 +16,7 @@ from petsc4py import PETSc
 from .config import SolverConfig
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
-from .linear import REASONS_SNES, check_options, clear_options, direct_options, set_options
+from .linear import REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
 
 
 class NewtonSolver:
@@ -31,11 +31,17 @@ class NewtonSolver:
 
     def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm) -> None:
         self.problem, self.settings = problem, settings
-        self.factorizations = 0
+        self.factorizations = 0  # factorizations (direct) or preconditioner set-ups (iterative)
+        self.krylov_iterations = 0  # summed over the run (iterative solves)
         self._scale = 1.0
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
-        defaults = direct_options(comm, settings.linear, problem.symmetric)
+        # iterative: CG + GAMG on J with the rigid motions as near-nullspace; each Newton correction starts
+        # from zero (the level itself starts from u_{n-1}), and GAMG is set up again only when J changes
+        defaults = linear_options(comm, settings.linear, problem.symmetric, settings.rtol, elasticity=True)
+        if settings.linear == "iterative":
+            self._nullspace = rigid_body_modes(problem.u.function_space)
+            problem.J.setNearNullSpace(self._nullspace)
         defaults.update({
             "snes_type": "newtonls" if problem.nonlinear else "ksponly",
             "snes_linesearch_type": "basic",
@@ -102,6 +108,7 @@ class NewtonSolver:
             problem.evaluate(u.vector, problem.r)
             residual = problem.r.norm()
         ksp_reason = self.snes.getKSP().getConvergedReason()
+        self.krylov_iterations += self.snes.getLinearSolveIterations()
         tol = self.settings.rtol * scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
         if ok and not problem.nonlinear:
