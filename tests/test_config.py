@@ -128,6 +128,8 @@ REJECT = [
     ({"body_force": {"f": [0.0, -9.81, 0.0]}}, "body_force.f"),
     ({"body_force": {"g": [0.0, -9.81]}}, "body_force.g"),
     ({"body_force": {"f": [[0.0, 0.0, 0.0], [-1.0, 0.0, 1.0]]}}, "body_force.f"),
+    ({"solver": {"linear": "iterative", "method": "fixed_point"}}, "solver.linear"),
+    ({"solver": {"linear": "gmres"}}, "solver.linear"),
     # the built-in box
     *[({"mesh": {"kind": "box", **m}, "boundary": _BOX_PARTS, "material": {"model": "3d"}}, key) for m, key in (
         ({"corners": [[0, 0], [1, 1]]}, "mesh.corners[0]"),
