@@ -3,7 +3,8 @@
 The contact term's generalized derivative is H(u_nu - g)/mu (UFL differentiates max_value to
 it). The Jacobian is rebuilt only when the active set changes, and PETSc refactors a
 matrix only when it was modified, so a step with an unchanged active set costs one
-triangular solve pair. Without contact (and without an implicit memory term) the problem
+triangular solve pair (with ``solver.linear = "iterative"``, GAMG is likewise set up again only
+then; see :func:`linear.iterative_options`). Without contact (and without an implicit memory term) the problem
 is linear and SNES runs as a single KSP solve.
 """
 

@@ -124,3 +124,25 @@ def test_iterative_equals_direct_on_3d_example1(tmp_path, direct_3d):
 @pytest.mark.parametrize("linear", ["auto", "iterative"])
 def test_two_ranks_equal_serial_on_3d_example1(tmp_path, direct_3d, linear):
     _assert_same_run(direct_3d, _run_3d(tmp_path / "p", linear, nproc=2))
+
+
+def test_gamg_is_set_up_again_only_when_the_active_set_changes(comm):
+    """PETSc's own count of preconditioner set-ups: the same after 3 steps as after 10 when the
+    Jacobian (the contact active set) stays put after level 0."""
+    from conftest import ROOT, solve
+
+    from solver.config import load
+
+    def setups(T: float) -> tuple[int, list[int]]:
+        event = PETSc.Log.Event("PCSetUp")
+        before = event.getPerfInfo()["count"]
+        cfg = load(ROOT / "configs/example1_3d.toml", ["mesh.nx=4", "mesh.ny=4", "mesh.nz=4", "time.k=0.1",
+                                                        f"time.T={T}", "solver.linear='iterative'"])
+        _, rows = solve(cfg, comm)
+        return event.getPerfInfo()["count"] - before, [r["factorizations"] for r in rows]
+
+    PETSc.Log.begin()
+    short, f_short = setups(0.3)
+    long, f_long = setups(1.0)
+    assert f_long[0] > 0 and not any(f_long[1:]) and f_short == f_long[:4]  # J changes at level 0 only
+    assert short == long > 0
