@@ -57,7 +57,7 @@ class Damage:
 
     def __init__(self, V: fem.FunctionSpace, u: fem.Function, cfg: DamageConfig, k: float, degree: int,
                  petsc_options: tuple[tuple[str, str], ...] = (), linear: str = "auto",
-                 scheme: str = "explicit") -> None:
+                 scheme: str = "explicit", rtol: float = 1e-10) -> None:
         self.cfg = cfg
         self.V = V
         self.zeta = fem.Function(V, name="damage")
@@ -95,7 +95,8 @@ class Damage:
             self.A.setOption(PETSc.Mat.Option.SPD, True)
         self.b = fpetsc.create_vector(self.L)
         self.x = self.b.duplicate()
-        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear, symmetric=not self.semi_implicit)
+        self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear, symmetric=not self.semi_implicit,
+                            rtol=rtol)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
         if self.cnab2:
             self.s = self.b.duplicate()  # (phi_{n-1}, xi)

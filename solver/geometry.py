@@ -10,6 +10,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from .config import BoundaryConfig, MeshConfig
+from .config.boundary import FACE_AXIS, face_bounds
 from .errors import ConfigError
 
 _DIAGONAL = {
@@ -90,6 +91,47 @@ def _rectangle(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...
     return msh, ft, tags
 
 
+def _face_marker(side: str, corners, patch, tol: float):
+    """Points on a box face (and inside its sub-rectangle, if any)."""
+    axis, which = FACE_AXIS[side]
+    value = corners[which][axis]
+    along = [a for a in range(3) if a != axis]
+
+    def marker(x: np.ndarray) -> np.ndarray:
+        on = np.isclose(x[axis], value, atol=tol)
+        if patch is not None:
+            for a, (lo, hi) in zip(along, patch):
+                on &= (x[a] >= lo - tol) & (x[a] <= hi + tol)
+        return on
+
+    return marker
+
+
+def _tag(msh: dmesh.Mesh, parts: tuple[BoundaryConfig, ...], marker_of) -> tuple[dmesh.MeshTags, dict[str, int]]:
+    """Facet tags 1, 2, ... of the parts, in order; ``marker_of(part)`` says which boundary points it holds."""
+    fdim = msh.topology.dim - 1
+    tags = {}
+    indices, values = [], []
+    for i, part in enumerate(parts, start=1):
+        facets = dmesh.locate_entities_boundary(msh, fdim, marker_of(part))
+        indices.append(facets)
+        values.append(np.full(len(facets), i, dtype=np.int32))
+        tags[part.name] = i
+    idx = np.concatenate(indices) if indices else np.empty(0, np.int32)
+    val = np.concatenate(values) if values else np.empty(0, np.int32)
+    order = np.argsort(idx)
+    return dmesh.meshtags(msh, fdim, idx[order].astype(np.int32), val[order]), tags
+
+
+def _box(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...]):
+    """The box [corners] cut into nx x ny x nz hexahedra of 6 tetrahedra each; faces tagged like a rectangle's sides."""
+    p0, p1 = (np.array(c, dtype=float) for c in cfg.corners)
+    msh = dmesh.create_box(comm, [p0, p1], [cfg.nx, cfg.ny, cfg.nz], cell_type=dmesh.CellType.tetrahedron)
+    tol = 1e-10 * float(np.max(p1 - p0))
+    ft, tags = _tag(msh, parts, lambda part: _face_marker(part.side, cfg.corners, part.patch, tol))
+    return msh, ft, tags
+
+
 def _gmsh(comm: MPI.Comm, cfg: MeshConfig, gdim: int):
     import gmsh
     from dolfinx.io import gmshio
@@ -115,6 +157,8 @@ def build(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...], gd
     """Make the mesh and tag the named boundary parts; check every part is found."""
     if cfg.kind == "rectangle":
         msh, ft, tags = _rectangle(comm, cfg, parts)
+    elif cfg.kind == "box":
+        msh, ft, tags = _box(comm, cfg, parts)
     else:
         msh, ft, tags = _gmsh(comm, cfg, gdim)
         missing = [p.name for p in parts if p.name not in tags]
@@ -134,6 +178,15 @@ def build(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...], gd
                 raise ConfigError(
                     f"boundary.{part.name}.interval = {[lo, hi]}: the mesh ({cfg.nx}x{cfg.ny}) has no nodes at its ends "
                     f"(found length {length:.6g}); choose nx, ny so that the ends fall on mesh nodes"
+                )
+    elif cfg.kind == "box":
+        for part in parts:
+            (a0, a1), (b0, b1) = part.patch or face_bounds(part.side, cfg.corners)
+            area, want = geo.measure(part.name), (a1 - a0) * (b1 - b0)
+            if abs(area - want) > 1e-8 * want:
+                raise ConfigError(
+                    f"boundary.{part.name}.interval = {[[a0, a1], [b0, b1]]}: the mesh ({cfg.nx}x{cfg.ny}x{cfg.nz}) has "
+                    f"no nodes on its edges (found area {area:.6g}); choose nx, ny, nz so that they fall on mesh nodes"
                 )
     else:
         for part in parts:

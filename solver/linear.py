@@ -1,4 +1,4 @@
-"""PETSc options and factored direct solvers shared by the physics modules.
+"""PETSc options, factored direct solvers and preconditioned Krylov solvers shared by the physics modules.
 
 Each solver has its own options prefix (``mech_`` for the displacement SNES
 and its KSP, ``damage_`` for the damage KSP) so that a scene's
@@ -7,6 +7,10 @@ and its KSP, ``damage_`` for the damage KSP) so that a scene's
 
 from __future__ import annotations
 
+from contextlib import ExitStack
+
+import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -36,6 +40,73 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
         opts.update({f"redundant_{k}": v for k, v in seq.items()})
         return opts
     return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps"}
+
+
+# Krylov tolerances relative to the Newton tolerance rtol (see iterative_options)
+KSP_RTOL_FACTOR = 0.1
+
+
+def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True) -> dict[str, str]:
+    """CG (GMRES if the matrix is not symmetric) with GAMG for the displacement (``elasticity``, with the
+    rigid-body near-nullspace that :func:`rigid_body_modes` gives) or Jacobi for the damage's mass-plus-
+    diffusion matrix, whose diagonal dominates.
+
+    The Krylov tolerance is tied to the Newton tolerance ``rtol``: a linear solve stops when its true
+    (unpreconditioned) residual is below ``0.1 rtol`` times its right-hand side. The Newton residual test
+    (||F|| <= rtol * scale, evaluated with the exact F) still decides convergence; an inexact step can
+    only cost an extra Newton iteration, not accuracy. The factor 0.1 also keeps the step test
+    ||du|| <= rtol ||u|| sound: the step is exact to 10% of its own (already small) size, so u equals the
+    direct solver's to the reported accuracy. The preconditioner is set up again only when PETSc sees
+    the matrix modified (the Jacobian changes only with the contact active set), like a factorization.
+    """
+    opts = {"ksp_type": "cg" if symmetric else "gmres", "ksp_rtol": repr(KSP_RTOL_FACTOR * rtol),
+            "ksp_atol": "0.0", "ksp_norm_type": "unpreconditioned", "ksp_max_it": "2000"}
+    if not symmetric:
+        opts["ksp_gmres_restart"] = "200"
+    if elasticity:
+        # plain aggregation: with the contact penalty (1/mu ~ 1e10 on the active facets) GAMG's default
+        # smoothed prolongator made the preconditioner indefinite (CG: DIVERGED_INDEFINITE_PC at the first
+        # active set of 3-D Example 1); unsmoothed it converges (35 iterations at 8x8x8)
+        opts.update({"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "0", "pc_gamg_sym_graph": "true",
+                     "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
+                     "mg_levels_esteig_ksp_type": "cg"})
+    else:
+        opts["pc_type"] = "jacobi"
+    return opts
+
+
+def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elasticity: bool) -> dict[str, str]:
+    """The options of ``solver.linear = kind``: a direct factorization, or ``iterative``."""
+    if kind == "iterative":
+        return iterative_options(rtol, elasticity, symmetric)
+    return direct_options(comm, kind, symmetric)
+
+
+def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
+    """The rigid motions of a vector P-k space (3 in 2-D, 6 in 3-D), orthonormalized: GAMG's near-nullspace
+    (built as in dolfinx's demo_elasticity.py)."""
+    from dolfinx import la
+
+    imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    dim = V.mesh.geometry.dim
+    nmodes = 3 if dim == 2 else 6
+    basis = [la.create_petsc_vector(imap, bs) for _ in range(nmodes)]
+    x = V.tabulate_dof_coordinates()  # one row per node, ghosts included (like the local form)
+    with ExitStack() as stack:
+        vecs = [np.asarray(stack.enter_context(b.localForm())) for b in basis]
+        dofs = [V.sub(i).dofmap.list.array for i in range(dim)]
+        for i in range(dim):  # translations
+            vecs[i][dofs[i]] = 1.0
+        xs = [x[dofs[0] // bs, i] for i in range(dim)]  # the nodes of dofs[0], dofs[1], ... in one order
+        if dim == 2:
+            vecs[2][dofs[0]] = -xs[1]
+            vecs[2][dofs[1]] = xs[0]
+        else:
+            for m, (a, b) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
+                vecs[m][dofs[a]] = -xs[b]
+                vecs[m][dofs[b]] = xs[a]
+    la.orthonormalize(basis)
+    return PETSc.NullSpace().create(vectors=basis, comm=V.mesh.comm)
 
 
 def set_options(prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...]) -> None:
@@ -113,16 +184,19 @@ def _probe(comm: MPI.Comm, prefix: str, defaults: dict[str, str], user: tuple[tu
 
 
 def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, str], ...],
-             kind: str = "auto", symmetric: bool = True) -> PETSc.KSP:
-    """A KSP on a matrix; with the default options it factors once, and again only if A changes.
+             kind: str = "auto", symmetric: bool = True, rtol: float = 1e-10) -> PETSc.KSP:
+    """A KSP on a matrix; with the default options it factors once, and again only if A changes
+    (``kind = 'iterative'``: Jacobi-preconditioned CG to ``0.1 rtol``, warm-started from the last solution).
     Options PETSc rejects raise a ConfigError first (:func:`check_options`)."""
-    defaults = direct_options(comm, kind, symmetric)
+    defaults = linear_options(comm, kind, symmetric, rtol, elasticity=False)
     check_options(comm, prefix, defaults, user)
     set_options(prefix, defaults, user)
     ksp = PETSc.KSP().create(comm)
     ksp.setOptionsPrefix(prefix)
     ksp.setOperators(A)
     ksp.setFromOptions()
+    if kind == "iterative":
+        ksp.setInitialGuessNonzero(True)  # x holds the last solution: the previous level's field
     clear_options(prefix, defaults)
     return ksp
 

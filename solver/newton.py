@@ -3,20 +3,22 @@
 The contact term's generalized derivative is H(u_nu - g)/mu (UFL differentiates max_value to
 it). The Jacobian is rebuilt only when the active set changes, and PETSc refactors a
 matrix only when it was modified, so a step with an unchanged active set costs one
-triangular solve pair. Without contact (and without an implicit memory term) the problem
+triangular solve pair (with ``solver.linear = "iterative"``, GAMG is likewise set up again only
+then; see :func:`linear.iterative_options`). Without contact (and without an implicit memory term) the problem
 is linear and SNES runs as a single KSP solve.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from .config import SolverConfig
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
-from .linear import REASONS_SNES, check_options, clear_options, direct_options, set_options
+from .linear import REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
 
 
 class NewtonSolver:
@@ -31,11 +33,18 @@ class NewtonSolver:
 
     def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm) -> None:
         self.problem, self.settings = problem, settings
-        self.factorizations = 0
+        self.factorizations = 0  # factorizations (direct) or preconditioner set-ups (iterative)
+        self.krylov_iterations = 0  # summed over the run (iterative solves)
         self._scale = 1.0
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
-        defaults = direct_options(comm, settings.linear, problem.symmetric)
+        # iterative: CG + GAMG on J with the rigid motions as near-nullspace; each Newton correction starts
+        # from zero (the level itself starts from u_{n-1}), and GAMG is set up again only when J changes
+        defaults = linear_options(comm, settings.linear, problem.symmetric, settings.rtol, elasticity=True)
+        self._project = settings.linear == "iterative"
+        if self._project:
+            self._nullspace = rigid_body_modes(problem.u.function_space)
+            problem.J.setNearNullSpace(self._nullspace)
         defaults.update({
             "snes_type": "newtonls" if problem.nonlinear else "ksponly",
             "snes_linesearch_type": "basic",
@@ -61,6 +70,12 @@ class NewtonSolver:
             self._initial.copy(F)
             self._initial = None
             return
+        if self._project:
+            # a Krylov step leaves the prescribed dofs off their values by its own error (~1e-17 after a step
+            # of ~1e-2); the contact term couples them into free rows with 1/mu ~ 1e10, a residual of ~1e-7
+            # the Jacobian (prescribed columns removed) cannot see, so Newton would stall there. A direct
+            # solve puts them exactly; here the iterate is put on them before it is evaluated.
+            fpetsc.set_bc(x, self.problem.bcs)
         self.problem.evaluate(x, F)
 
     def _jacobian(self, snes: PETSc.SNES, x: PETSc.Vec, J: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -102,6 +117,7 @@ class NewtonSolver:
             problem.evaluate(u.vector, problem.r)
             residual = problem.r.norm()
         ksp_reason = self.snes.getKSP().getConvergedReason()
+        self.krylov_iterations += self.snes.getLinearSolveIterations()
         tol = self.settings.rtol * scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
         if ok and not problem.nonlinear:

@@ -78,7 +78,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
         scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
         damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        cfg.solver.linear, scheme)
+                        cfg.solver.linear, scheme, cfg.solver.rtol)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))

@@ -41,6 +41,10 @@ def test_traction_table_is_left_continuous_at_jumps():
     assert f(2.0) == (2.0, 0.0)
 
 
+_BOX_PARTS = {"left": {"role": "clamped"}, "bottom": {"role": "contact"}}
+
+_BOX_PARTS = {"left": {"role": "clamped"}, "bottom": {"role": "contact"}}
+
 REJECT = [
     ({"meshh": {}}, "meshh"),
     ({"mesh": {"nx": 0}}, "mesh.nx"),
@@ -124,6 +128,39 @@ REJECT = [
     ({"body_force": {"f": [0.0, -9.81, 0.0]}}, "body_force.f"),
     ({"body_force": {"g": [0.0, -9.81]}}, "body_force.g"),
     ({"body_force": {"f": [[0.0, 0.0, 0.0], [-1.0, 0.0, 1.0]]}}, "body_force.f"),
+    ({"solver": {"linear": "iterative", "method": "fixed_point"}}, "solver.linear"),
+    ({"solver": {"linear": "gmres"}}, "solver.linear"),
+    # the built-in box
+    *[({"mesh": {"kind": "box", **m}, "boundary": _BOX_PARTS, "material": {"model": "3d"}}, key) for m, key in (
+        ({"corners": [[0, 0], [1, 1]]}, "mesh.corners[0]"),
+        ({"corners": [[0, 0, 0], [1, 1, 0]]}, "mesh.corners"),
+        ({"corners": [[0, 0, 0]]}, "mesh.corners"),
+        ({"nz": 0}, "mesh.nz"),
+        ({"diagonal": "left"}, "mesh.diagonal"),
+        ({"nx": 1000, "ny": 1000, "nz": 1000}, "mesh.nx*mesh.ny*mesh.nz"),
+    )],
+    ({"mesh": {"nz": 4}}, "mesh.nz"),
+    ({"mesh": {"kind": "box"}, "boundary": _BOX_PARTS}, "material.model"),
+    ({"mesh": {"kind": "box"}, "boundary": _BOX_PARTS, "material": {"model": "plane_strain"}}, "material.model"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"}}, "boundary"),
+    ({"material": {"model": "3d"}}, "material.model"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"},
+      "boundary": {**_BOX_PARTS, "side": {"role": "traction", "traction": [1.0, 0.0, 0.0], "side": "middle"}}},
+     "boundary.side.side"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"},
+      "boundary": {**_BOX_PARTS, "front": {"role": "traction", "traction": [1.0, 0.0, 0.0], "interval": [0.0, 0.5]}}},
+     "boundary.front.interval"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"},
+      "boundary": {**_BOX_PARTS, "front": {"role": "traction", "traction": [1.0, 0.0, 0.0],
+                                            "interval": [[0.0, 0.5], [0.5, 1.5]]}}},
+     "boundary.front.interval[1]"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"},
+      "boundary": {**_BOX_PARTS, "b2": {"role": "traction", "traction": [1.0, 0.0, 0.0], "side": "bottom",
+                                         "interval": [[0.5, 1.0], [0.5, 1.0]]}}},
+     "boundary.b2"),
+    ({"mesh": {"kind": "box"}, "material": {"model": "3d"},
+      "boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap": [[0, 0], [1, 0.1]]}}},
+     "boundary.bottom.gap_coordinate"),
 ]
 
 
@@ -248,3 +285,14 @@ def test_degrees_choose_the_quadrature_and_the_order_chooses_the_memory_rule():
     assert p2.memory.rule == "trapezoid_extrapolated"
     mine = from_dict({"discretization": {"u_degree": 2}, "solver": {"quadrature_degree": 5}})
     assert mine.solver.quadrature_degree == 5  # an explicit setting wins
+
+
+def test_box_round_trips_and_is_three_dimensional():
+    cfg = load(ROOT / "configs/example1_3d.toml", ["boundary.top.role='traction'", "boundary.top.traction=[0, 0, 1]",
+                                                     "boundary.top.interval=[[0.25, 0.75], [0.0, 0.5]]"])
+    assert cfg.dim == 3 and cfg.mesh.kind == "box" and cfg.mesh.nz == 8
+    top = next(b for b in cfg.boundaries if b.name == "top")
+    assert top.patch == ((0.25, 0.75), (0.0, 0.5)) and top.interval is None
+    again = from_dict(to_dict(cfg), source=cfg.source)
+    assert again == cfg
+    assert "diagonal" not in to_dict(cfg)["mesh"] and "nz" not in to_dict(load(ROOT / "configs/example1.toml"))["mesh"]

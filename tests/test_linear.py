@@ -1,6 +1,7 @@
 """PETSc solver options: the direct choices, scene options on top, nothing left behind."""
 
 import numpy as np
+import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -35,3 +36,113 @@ def test_make_ksp_solves_a_small_spd_system():
     ksp.solve(b, x)
     assert ksp.getConvergedReason() > 0 and REASONS_KSP[ksp.getConvergedReason()].startswith("CONVERGED")
     assert np.allclose(x.array, np.linalg.solve([[4, 1, 0], [1, 3, 1], [0, 1, 2]], [1, 2, 3]))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
+    """3 (2-D) or 6 (3-D) orthonormal vectors that the stiffness without supports maps to zero."""
+    import ufl
+    from dolfinx import fem, mesh
+    from dolfinx.fem import petsc as fpetsc
+
+    from solver.linear import rigid_body_modes
+
+    msh = mesh.create_unit_square(comm, 3, 4) if dim == 2 else mesh.create_unit_cube(comm, 2, 3, 2)
+    V = fem.VectorFunctionSpace(msh, ("CG", 2))
+    u, v = ufl.TrialFunction(V), ufl.TestFunction(V)
+    eps = ufl.sym(ufl.grad(u))
+    K = fpetsc.assemble_matrix(fem.form((2 * ufl.inner(eps, ufl.sym(ufl.grad(v))) + ufl.div(u) * ufl.div(v)) * ufl.dx))
+    K.assemble()
+    ns = rigid_body_modes(V)
+    basis = ns.getVecs()
+    assert len(basis) == (3 if dim == 2 else 6)
+    gram = np.array([[a.dot(b) for b in basis] for a in basis])
+    assert np.allclose(gram, np.eye(len(basis)), atol=1e-12)
+    assert ns.test(K)  # K b = 0 for every mode
+    y = basis[0].duplicate()
+    for b in basis:
+        K.mult(b, y)
+        assert y.norm() < 1e-10 * K.norm()
+
+
+def test_iterative_options_tie_the_krylov_tolerance_to_newton():
+    from solver.linear import iterative_options, linear_options
+
+    opts = iterative_options(1e-10, elasticity=True)
+    assert opts["ksp_type"] == "cg" and opts["pc_type"] == "gamg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
+    assert opts["ksp_norm_type"] == "unpreconditioned" and float(opts["ksp_atol"]) == 0.0
+    assert iterative_options(1e-8, elasticity=False, symmetric=False)["ksp_type"] == "gmres"
+    assert linear_options(MPI.COMM_WORLD, "iterative", True, 1e-8, elasticity=False)["pc_type"] == "jacobi"
+    assert linear_options(MPI.COMM_WORLD, "auto", True, 1e-8, elasticity=True) == direct_options(MPI.COMM_WORLD, "auto")
+
+
+SMALL_3D = ["--set", "mesh.nx=4", "--set", "mesh.ny=4", "--set", "mesh.nz=4", "--set", "time.k=0.1", "--no-progress"]
+
+
+def _run_3d(path, linear: str, nproc: int = 1):
+    from conftest import run_cli
+
+    res = run_cli(["run", "configs/example1_3d.toml", *SMALL_3D, "--set", f"solver.linear='{linear}'",
+                   "--output", str(path)], nproc=nproc)
+    assert res.returncode == 0, res.stderr
+    return path
+
+
+def _assert_same_run(a_dir, b_dir, tol: float = 1e-7) -> None:
+    """Displacement and damage at every node and written time, and every CSV column, agree to ``tol``."""
+    from conftest import by_node
+
+    from solver.post import read_csv, read_results
+
+    a, b = read_results(a_dir), read_results(b_dir)
+    assert a["times"] == b["times"] and len(a["times"]) == 11
+    for t in a["times"]:
+        for name in ("displacement", "damage"):
+            assert np.allclose(by_node(a, name, t), by_node(b, name, t), rtol=0, atol=tol), (name, t)
+    assert np.abs(by_node(a, "displacement", 1.0)).max() > 0.03  # the cube does move (0.045 at t = 1)
+    ra, rb = read_csv(a_dir / "timeseries.csv"), read_csv(b_dir / "timeseries.csv")
+    assert len(ra) == len(rb) == 11
+    for x, y in zip(ra, rb):
+        for key in x:
+            if key.startswith("time_") or key in ("wall_time", "residual", "newton_iterations", "linear_solves",
+                                                   "factorizations"):  # timings, round-off, solver effort
+                continue
+            assert y[key] == pytest.approx(x[key], rel=tol, abs=tol, nan_ok=True), key
+
+
+@pytest.fixture(scope="module")
+def direct_3d(tmp_path_factory):
+    return _run_3d(tmp_path_factory.mktemp("direct") / "r", "auto")
+
+
+@pytest.mark.serial
+def test_iterative_equals_direct_on_3d_example1(tmp_path, direct_3d):
+    _assert_same_run(direct_3d, _run_3d(tmp_path / "it", "iterative"))
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("linear", ["auto", "iterative"])
+def test_two_ranks_equal_serial_on_3d_example1(tmp_path, direct_3d, linear):
+    _assert_same_run(direct_3d, _run_3d(tmp_path / "p", linear, nproc=2))
+
+
+def test_gamg_is_set_up_again_only_when_the_active_set_changes(comm):
+    """PETSc's own count of preconditioner set-ups: the same after 3 steps as after 10 when the
+    Jacobian (the contact active set) stays put after level 0."""
+    from conftest import ROOT, solve
+
+    from solver.config import load
+
+    def setups(T: float) -> tuple[int, list[int]]:
+        event = PETSc.Log.Event("PCSetUp")
+        before = event.getPerfInfo()["count"]
+        cfg = load(ROOT / "configs/example1_3d.toml", ["mesh.nx=4", "mesh.ny=4", "mesh.nz=4", "time.k=0.1",
+                                                        f"time.T={T}", "solver.linear='iterative'"])
+        _, rows = solve(cfg, comm)
+        return event.getPerfInfo()["count"] - before, [r["factorizations"] for r in rows]
+
+    PETSc.Log.begin()
+    short, f_short = setups(0.3)
+    long, f_long = setups(1.0)
+    assert f_long[0] > 0 and not any(f_long[1:]) and f_short == f_long[:4]  # J changes at level 0 only
+    assert short == long > 0

@@ -9,6 +9,9 @@ from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
 
 SIDES = ("left", "right", "bottom", "top")
+BOX_FACES = ("left", "right", "front", "back", "bottom", "top")
+# a box face: (normal axis, which corner), its two tangential axes in order
+FACE_AXIS = {"left": (0, 0), "right": (0, 1), "front": (1, 0), "back": (1, 1), "bottom": (2, 0), "top": (2, 1)}
 ROLES = ("clamped", "displacement", "traction", "contact")
 LAWS = ("linear", "power", "limited_penetration")
 AXES = ("x", "y", "z")
@@ -51,8 +54,10 @@ class BoundaryConfig:
     """One named boundary part and its role.
 
     On a rectangle, ``side`` (default: the part's name) picks the side and
-    ``interval`` an optional sub-interval along it; on a gmsh mesh the name is
-    a physical group. ``traction`` is a constant vector, or a table of rows
+    ``interval`` an optional sub-interval along it; on a box, ``side`` picks a face
+    (left/right: x, front/back: y, bottom/top: z) and ``patch`` an optional
+    sub-rectangle [[a0, a1], [b0, b1]] in its two tangential coordinates (in x, y, z
+    order; TOML key ``interval``); on a gmsh mesh the name is a physical group. ``traction`` is a constant vector, or a table of rows
     ``[t, f_x, f_y(, f_z)]`` interpolated linearly in time (a repeated time is a
     jump; at the jump time the earlier row wins).
 
@@ -85,6 +90,7 @@ class BoundaryConfig:
     depth: float = 0.0
     mu_stiff: float = 1e-10
     displacement: tuple[Table | None, ...] = ()
+    patch: tuple[tuple[float, float], tuple[float, float]] | None = None
 
     def traction_at(self, t: float) -> tuple[float, ...]:
         """Traction vector at time ``t`` (left-continuous at jumps)."""
@@ -136,7 +142,7 @@ def parse(ctx: Ctx, t: Any, scene: dict) -> tuple[BoundaryConfig, ...]:
     dim = scene["dim"]
     if t is None:
         if mesh.kind != "rectangle":
-            raise ctx.fail("boundary", "<missing>", "a gmsh scene must name its boundary parts")
+            raise ctx.fail("boundary", "<missing>", f"a {mesh.kind} scene must name its boundary parts")
         t = PAPER_BOUNDARIES
     if not isinstance(t, dict) or not t:
         raise ctx.fail("boundary", t, "must hold at least one [boundary.NAME] table")
@@ -144,6 +150,8 @@ def parse(ctx: Ctx, t: Any, scene: dict) -> tuple[BoundaryConfig, ...]:
     _check_rigid_motions(ctx, out, dim)
     if mesh.kind == "rectangle":
         _check_overlaps(ctx, out, mesh)
+    if mesh.kind == "box":
+        _check_box_overlaps(ctx, out, mesh)
     return tuple(out)
 
 
@@ -168,7 +176,7 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
     for key in ("traction", "displacement", *_CONTACT_KEYS):
         if key in b and key not in _PER_ROLE[role]:
             raise ctx.fail(f"{sec}.{key}", b[key], f"not used by role '{role}'")
-    side, interval = "", None
+    side, interval, patch = "", None, None
     if mesh.kind == "rectangle":
         side = string(ctx, f"{sec}.side", b.get("side", name), SIDES)
         if "interval" in b:
@@ -178,11 +186,15 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
             if not (lo <= iv[0] < iv[1] <= hi):
                 raise ctx.fail(f"{sec}.interval", list(iv), f"must satisfy {lo} <= a < b <= {hi}")
             interval = (iv[0], iv[1])
+    elif mesh.kind == "box":
+        side = string(ctx, f"{sec}.side", b.get("side", name), BOX_FACES)
+        if "interval" in b:
+            patch = _patch(ctx, f"{sec}.interval", b["interval"], side, mesh)
     else:
         for key in ("side", "interval"):
             if key in b:
-                raise ctx.fail(f"{sec}.{key}", b[key], "only for built-in rectangles; gmsh parts are physical groups")
-    part = BoundaryConfig(name, role, side, interval)
+                raise ctx.fail(f"{sec}.{key}", b[key], "only for built-in rectangles and boxes; gmsh parts are physical groups")
+    part = BoundaryConfig(name, role, side, interval, patch=patch)
     if role == "traction":
         if "traction" not in b:
             raise ctx.fail(f"{sec}.traction", "<missing>", "a traction part needs a traction")
@@ -192,6 +204,26 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
     if role == "contact":
         return _contact(ctx, sec, b, part, mesh, dim)
     return part
+
+
+def face_bounds(side: str, corners) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The full extent of a box face in its two tangential coordinates (x, y, z order)."""
+    axis = FACE_AXIS[side][0]
+    return tuple((corners[0][a], corners[1][a]) for a in range(3) if a != axis)  # type: ignore[return-value]
+
+
+def _patch(ctx: Ctx, key: str, v: Any, side: str, mesh: MeshConfig) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A sub-rectangle [[a0, a1], [b0, b1]] of a box face, inside the face."""
+    tang = "".join(a for i, a in enumerate("xyz") if i != FACE_AXIS[side][0])
+    if not isinstance(v, list) or len(v) != 2:
+        raise ctx.fail(key, v, f"must be [[{tang[0]}0, {tang[0]}1], [{tang[1]}0, {tang[1]}1]] on face '{side}'")
+    out = []
+    for i, ((lo, hi), r) in enumerate(zip(face_bounds(side, mesh.corners), v)):
+        iv = vector(ctx, f"{key}[{i}]", r, 2)
+        if not (lo <= iv[0] < iv[1] <= hi):
+            raise ctx.fail(f"{key}[{i}]", list(iv), f"must satisfy {lo} <= a < b <= {hi} ({tang[i]} on face '{side}')")
+        out.append((iv[0], iv[1]))
+    return (out[0], out[1])
 
 
 def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, ...]:
@@ -274,9 +306,9 @@ def _gap_coordinate(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: Mes
     """x along a horizontal side, y along a vertical one; required on gmsh parts."""
     if "gap_coordinate" in b:
         return string(ctx, f"{sec}.gap_coordinate", b["gap_coordinate"], AXES[:dim])
-    if mesh.kind != "rectangle":
+    if mesh.kind != "rectangle":  # a box face has two tangential coordinates: say which
         raise ctx.fail(f"{sec}.gap_coordinate", "<missing>",
-                       "a gap table on a gmsh part needs gap_coordinate = " + " | ".join(f"'{a}'" for a in AXES[:dim]))
+                       f"a gap table on a {mesh.kind} part needs gap_coordinate = " + " | ".join(f"'{a}'" for a in AXES[:dim]))
     return "x" if part.side in ("bottom", "top") else "y"
 
 
@@ -295,6 +327,21 @@ def _check_overlaps(ctx: Ctx, parts: list[BoundaryConfig], mesh: MeshConfig) -> 
                 )
 
 
+def _check_box_overlaps(ctx: Ctx, parts: list[BoundaryConfig], mesh: MeshConfig) -> None:
+    """Two parts on one box face must not share area."""
+    for i, a in enumerate(parts):
+        for b in parts[i + 1 :]:
+            if a.side != b.side:
+                continue
+            pa = a.patch or face_bounds(a.side, mesh.corners)
+            pb = b.patch or face_bounds(b.side, mesh.corners)
+            if all(min(ia[1], ib[1]) > max(ia[0], ib[0]) for ia, ib in zip(pa, pb)):
+                raise ctx.fail(
+                    f"boundary.{b.name}", f"{b.side} {[list(r) for r in pb]}",
+                    f"overlaps boundary.{a.name} ({a.side} {[list(r) for r in pa]}); a part of the boundary has one role",
+                )
+
+
 def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
     out: dict[str, Any] = {}
     for b in parts:
@@ -303,6 +350,8 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
             entry["side"] = b.side
         if b.interval is not None:
             entry["interval"] = list(b.interval)
+        if b.patch is not None:
+            entry["interval"] = [list(r) for r in b.patch]
         if b.role == "traction":
             entry["traction"] = [list(r) for r in b.traction]
         if b.role == "displacement":

@@ -1,4 +1,4 @@
-"""[mesh]: the built-in rectangle (corners, nx, ny, diagonal) or a gmsh ``.msh`` file."""
+"""[mesh]: the built-in rectangle (corners, nx, ny, diagonal), box (corners, nx, ny, nz) or a gmsh ``.msh`` file."""
 
 from __future__ import annotations
 
@@ -10,42 +10,67 @@ from ..errors import ConfigError
 from .fields import Ctx, check_keys, integer, names, need, string, vector
 
 DIAGONALS = ("right", "left", "right/left", "left/right", "crossed")
+BUILT_IN = ("rectangle", "box")
+BOX_CORNERS = ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
 MAX_CELLS = 20_000_000  # refuse absurd meshes before allocating anything
 
 
 @dataclass(frozen=True)
 class MeshConfig:
-    """Built-in rectangle (corners, nx, ny, diagonal) or a gmsh ``.msh`` file."""
+    """Built-in rectangle (corners, nx, ny, diagonal), box (corners in 3-D, nx, ny, nz; tetrahedra)
+    or a gmsh ``.msh`` file. ``corners`` has two points of 2 (rectangle) or 3 (box) coordinates."""
 
     kind: str = "rectangle"
-    corners: tuple[tuple[float, float], tuple[float, float]] = ((0.0, 0.0), (1.0, 1.0))
+    corners: tuple[tuple[float, ...], tuple[float, ...]] = ((0.0, 0.0), (1.0, 1.0))
     nx: int = 16
     ny: int = 16
     diagonal: str = "right"
     file: str = ""
+    nz: int = 16
+
+    @property
+    def built_in(self) -> bool:
+        """Whether the mesh is a built-in rectangle or box (its sides are named, not physical groups)."""
+        return self.kind in BUILT_IN
+
+    @property
+    def dim(self) -> int:
+        """Geometric dimension of a built-in mesh (3 for a box, else 2)."""
+        return 3 if self.kind == "box" else 2
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> MeshConfig:
     t = check_keys(ctx, "mesh", t, names(MeshConfig))
     d = MeshConfig()
-    kind = string(ctx, "mesh.kind", t.get("kind", d.kind), ("rectangle", "gmsh"))
-    corners = d.corners
+    kind = string(ctx, "mesh.kind", t.get("kind", d.kind), ("rectangle", "box", "gmsh"))
+    gdim = 3 if kind == "box" else 2
+    corners = BOX_CORNERS if kind == "box" else d.corners
     if "corners" in t:
         c = t["corners"]
+        shape = "[[x0, y0, z0], [x1, y1, z1]]" if gdim == 3 else "[[x0, y0], [x1, y1]]"
         if not isinstance(c, list) or len(c) != 2:
-            raise ctx.fail("mesh.corners", c, "must be [[x0, y0], [x1, y1]]")
-        p0 = vector(ctx, "mesh.corners[0]", c[0], 2)
-        p1 = vector(ctx, "mesh.corners[1]", c[1], 2)
-        if not (p1[0] > p0[0] and p1[1] > p0[1]):
-            raise ctx.fail("mesh.corners", c, "need x1 > x0 and y1 > y0")
+            raise ctx.fail("mesh.corners", c, f"must be {shape}")
+        p0 = vector(ctx, "mesh.corners[0]", c[0], gdim)
+        p1 = vector(ctx, "mesh.corners[1]", c[1], gdim)
+        if not all(b > a for a, b in zip(p0, p1)):
+            raise ctx.fail("mesh.corners", c, "need " + " and ".join(f"{a}1 > {a}0" for a in "xyz"[:gdim]))
         corners = (p0, p1)  # type: ignore[assignment]
     nx = integer(ctx, "mesh.nx", t.get("nx", d.nx))
     ny = integer(ctx, "mesh.ny", t.get("ny", d.ny))
-    for key, n in (("mesh.nx", nx), ("mesh.ny", ny)):
+    nz = integer(ctx, "mesh.nz", t.get("nz", d.nz))
+    for key, n in (("mesh.nx", nx), ("mesh.ny", ny), ("mesh.nz", nz)):
         need(ctx, key, n, n >= 1, "must be at least 1")
+    if "nz" in t and kind != "box":
+        raise ctx.fail("mesh.nz", t["nz"], "only allowed with mesh.kind = 'box'")
+    if "diagonal" in t and kind == "box":
+        raise ctx.fail("mesh.diagonal", t["diagonal"],
+                       "only allowed with mesh.kind = 'rectangle' (a box is cut into 6 tetrahedra per cell)")
     cells = nx * ny * (4 if t.get("diagonal") == "crossed" else 2)
     if kind == "rectangle" and cells > MAX_CELLS:
         raise ctx.fail("mesh.nx*mesh.ny", f"{nx}*{ny}", f"gives {cells} cells; at most {MAX_CELLS} are allowed")
+    if kind == "box" and 6 * nx * ny * nz > MAX_CELLS:
+        raise ctx.fail("mesh.nx*mesh.ny*mesh.nz", f"{nx}*{ny}*{nz}",
+                       f"gives {6 * nx * ny * nz} cells; at most {MAX_CELLS} are allowed")
     diagonal = string(ctx, "mesh.diagonal", t.get("diagonal", d.diagonal), DIAGONALS)
     file = ""
     if kind == "gmsh":
@@ -62,7 +87,7 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MeshConfig:
         file = str(path)
     elif "file" in t:
         raise ctx.fail("mesh.file", t["file"], "only allowed with mesh.kind = 'gmsh'")
-    return MeshConfig(kind, corners, nx, ny, diagonal, file)
+    return MeshConfig(kind, corners, nx, ny, diagonal, file, nz)
 
 
 def to_toml(m: MeshConfig) -> dict:
@@ -70,6 +95,7 @@ def to_toml(m: MeshConfig) -> dict:
         return {"kind": "gmsh", "file": m.file}
     out = dataclasses.asdict(m)
     out.pop("file")
+    out.pop("diagonal" if m.kind == "box" else "nz")
     return out
 
 

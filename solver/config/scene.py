@@ -106,8 +106,9 @@ def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> C
     scene: dict[str, Any] = {"base": base or Path.cwd(), "dim": 2}
     for s in SECTIONS:
         scene[s.key] = s.parse(ctx, data.get(s.key, s.missing), scene)
-        if s.key == "mesh" and scene["mesh"].kind == "gmsh":
-            scene["dim"] = mesh.gmsh_dim(scene["mesh"].file)
+        if s.key == "mesh":
+            m = scene["mesh"]
+            scene["dim"] = mesh.gmsh_dim(m.file) if m.kind == "gmsh" else m.dim
     return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source)
 
 

@@ -10,7 +10,7 @@ from .fields import Ctx, check_keys, integer, names, need, number, string
 
 METHODS = ("newton", "penalty_duality", "fixed_point")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
-LINEAR = ("auto", "petsc", "mumps", "redundant")
+LINEAR = ("auto", "petsc", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
 
 
@@ -53,6 +53,10 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
         degs[key] = integer(ctx, f"solver.{key}", t.get(key, auto[key]))
         need(ctx, f"solver.{key}", degs[key], 1 <= degs[key] <= 10, "must be in 1..10")
     has_contact = any(b.role == "contact" for b in scene["boundary"])
+    if linear == "iterative" and method != "newton":
+        # their loops factor one matrix once and re-solve it many times: a direct solve is what they need
+        raise ctx.fail("solver.linear", linear, f"needs solver.method = 'newton' (not {method!r}); "
+                       "use a direct solver: auto, petsc, mumps or redundant")
     if method != "newton" and has_contact and scene["dim"] != 2:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
     power = [b.name for b in scene["boundary"] if b.role == "contact" and b.law == "power"]
