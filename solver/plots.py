@@ -134,6 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     if not (Path(args.directory) / "solution.xdmf").exists():
         print(f"error: {args.directory}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
         return 2
+    cells = read_results(args.directory)["topology"]
+    if cells.shape[1] != 3:
+        print(f"error: {args.directory}: plot draws 2-D (triangle) results; open 3-D ones in ParaView "
+              f"(python -m solver paraview {args.directory})", file=sys.stderr)
+        return 2
     for path in plot_results(args.directory, args.warp, args.output, tuple(args.times)):
         print(path)
     return 0
