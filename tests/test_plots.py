@@ -59,11 +59,12 @@ def test_plot_refuses_a_non_results_directory(tmp_path):
     assert res.returncode != 0 and "no solution.xdmf" in res.stderr
 
 
-def test_plot_refuses_3d_results_in_one_line(tmp_path):
+def test_plot_draws_3d_results(tmp_path):
     pytest.importorskip("pyvista", reason="the plotting extra is not installed (make install PLOTS=0)")
     out = tmp_path / "r"
     run = [sys.executable, "-m", "solver", "run", "configs/example1_3d.toml", "--output", str(out), "--no-progress",
            "--set", "mesh.nx=2", "--set", "mesh.ny=2", "--set", "mesh.nz=2", "--set", "time.k=0.5"]
     assert subprocess.run(run, cwd=ROOT, capture_output=True).returncode == 0
     res = subprocess.run([sys.executable, "-m", "solver", "plot", str(out)], cwd=ROOT, capture_output=True, text=True)
-    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "plot draws 2-D" in res.stderr
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert (out / "von_mises_final.png").stat().st_size > 10_000
