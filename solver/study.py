@@ -424,8 +424,9 @@ def main(argv: list[str] | None = None) -> int:
     tv.add_argument("--ref-k", type=float, default=0.0005)
     tv.add_argument("--ns", type=int, nargs="+", help="default: the paper's 4 ... 128")
     tv.add_argument("--ks", type=float, nargs="+", help="default: the paper's 0.05 ... 0.001")
-    tv.add_argument("--variants", nargs="+", default=list(T1_VARIANTS), choices=list(T1_VARIANTS),
-                    help="the named variants to report (each needs its runs: u0 and diagonal)")
+    tv.add_argument("--variants", nargs="+", default=list(T1_VARIANTS), choices=list(T1_VARIANTS), metavar="NAME",
+                    help="the named variants to report (default: all of " + ", ".join(T1_VARIANTS) + "); "
+                    "each needs its runs (u0, diagonal)")
     tv.add_argument("--no-search", action="store_true", help="skip the search over every combination of the "
                     "measurement-only choices")
     args = p.parse_args(argv)
