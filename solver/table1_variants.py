@@ -12,8 +12,8 @@ names one reading of its text:
   ``eps_voigt`` (the shear strain counted once), ``eps_engineering`` (gamma_12 = 2 eps_12),
   ``h1_semi`` (||grad .||), ``h1`` (the full H1 norm); ``zeta_norm``: ``l2`` or ``h1``;
 - ``sampling``: at the coarse levels (``coarse``), or at every stored reference level
-  with the coarse solution held (``hold``: the last coarse level) or linear in time
-  (``interpolate``);
+  with the coarse solution held (``hold``: the last coarse level, u_n on [t_n, t_n+1);
+  ``hold_next``: the next one, u_n on (t_n-1, t_n]) or linear in time (``interpolate``);
 - ``combine``: the maximum of the sum (``max_sum``, the paper's formula) or the sum of the
   two maxima (``sum_max``);
 - ``initial``: u_0 from the elastic contact problem (``elastic``, the paper's Remark 7) or
@@ -48,7 +48,7 @@ from .errors import UsageError
 TRANSFERS = ("prolong", "restrict")
 U_NORMS = ("eps", "eps_voigt", "eps_engineering", "h1_semi", "h1")
 ZETA_NORMS = ("l2", "h1")
-SAMPLINGS = ("coarse", "hold", "interpolate")
+SAMPLINGS = ("coarse", "hold", "hold_next", "interpolate")
 COMBINES = ("max_sum", "sum_max")
 INITIALS = ("elastic", "interpolant")
 DIAGONALS = ("right", "left")
@@ -105,11 +105,14 @@ VARIANTS: dict[str, Measurement] = {
     "eps-engineering": Measurement(u_norm="eps_engineering"),
     "zeta-h1": Measurement(zeta_norm="h1"),
     "hold": Measurement(sampling="hold"),
+    "hold-next": Measurement(sampling="hold_next"),
     "interpolate": Measurement(sampling="interpolate"),
     "max-each-part": Measurement(combine="sum_max"),
     "u0-interpolant": Measurement(initial="interpolant"),
     "left-diagonal": Measurement(diagonal="left"),
     "restrict+no-level-0": Measurement(transfer="restrict", level0=False),
+    "restrict+hold": Measurement(transfer="restrict", sampling="hold"),
+    "restrict+hold-next": Measurement(transfer="restrict", sampling="hold_next"),
     "restrict+h1": Measurement(transfer="restrict", u_norm="h1"),
     "restrict+u0-interpolant": Measurement(transfer="restrict", initial="interpolant"),
     "restrict+u0-interpolant+h1": Measurement(transfer="restrict", initial="interpolant", u_norm="h1"),
@@ -303,7 +306,7 @@ class Measurer:
                 bu, bz = space.coarse(u, z)
                 au, az = space.ref_block(i, i + 1)
                 series.add(space.transfer, "coarse", row["t"], space.forms(au[0] - bu, az[0] - bz))
-                if not {"hold", "interpolate"} & set(self.samplings):
+                if not {"hold", "hold_next", "interpolate"} & set(self.samplings):
                     continue
                 Qb = space.apply(bu, bz)
                 bb = np.array([(bu if f < U_FORMS else bz) @ Qb[f] for f in range(len(FORMS))])
@@ -312,7 +315,7 @@ class Measurer:
                 prev[s] = (bu, bz, Qb, bb)
                 if j == cfg.time.steps:  # the last level: held and interpolated equal the coarse value there
                     direct = series.f[space.transfer, "coarse"][-1]
-                    for sampling in ("hold", "interpolate"):
+                    for sampling in ("hold", "hold_next", "interpolate"):
                         series.add(space.transfer, sampling, row["t"], direct)
 
         if initial == "elastic":
@@ -328,7 +331,8 @@ class Measurer:
         return series, time.perf_counter() - t0
 
     def _between(self, series: Series, space: Space, prev: tuple, cur: tuple, j: int, m: int) -> None:
-        """Samples at the stored reference levels in [t_{j-1}, t_j): held at level j-1, or linear in time."""
+        """Samples at the stored reference levels in [t_{j-1}, t_j): held at level j-1 (or j after t_{j-1}),
+        or linear in time."""
         lo, hi = np.searchsorted(self.steps, [(j - 1) * m, j * m])
         if hi <= lo:
             return
@@ -343,6 +347,10 @@ class Measurer:
         b01 = np.array([(bu0 if f < U_FORMS else bz0) @ Qb1[f] for f in range(len(FORMS))])
         if "hold" in self.samplings:
             series.add(space.transfer, "hold", t, Qa - 2 * cross0 + bb0)
+        if "hold_next" in self.samplings:  # the interpolation formula with theta rounded up to 0 or 1
+            th = (theta > 0).astype(float)[:, None]
+            series.add(space.transfer, "hold_next", t,
+                       Qa - 2 * ((1 - th) * cross0 + th * cross1) + (1 - th) * bb0 + th * bb1)
         if "interpolate" in self.samplings:
             th = theta[:, None]
             series.add(space.transfer, "interpolate", t,
@@ -454,8 +462,9 @@ def write(result: dict, out: Path, command: str, top: int = 10) -> dict:
           "mesh; *level 0* whether t = 0 is in the maximum; *u norm* eps = ||eps(.)||_L2 (the paper's V norm), "
           "eps_voigt = shear strain counted once, eps_engineering = gamma_12 = 2 eps_12, h1_semi = ||grad .||, "
           "h1 = full H1; *zeta norm* l2 or h1; *sampling* coarse levels only, or every stored reference level "
-          "(every 2nd reference step here, t a multiple of 0.001) with the coarse solution held (last level) or "
-          "linear in time; *combine* max_n(u part + zeta part) (the paper's formula) or max u part + max zeta part; "
+          "(every 2nd reference step here, t a multiple of 0.001) with the coarse solution held (hold: the last "
+          "level; hold_next: the next one) or linear in time; *combine* max_n(u part + zeta part) (the paper's "
+          "formula) or max u part + max zeta part; "
           "*u0* elastic = the discrete elastic contact solve (Remark 7), interpolant = Pi^h of the reference's u at "
           "t = 0 (Corollary 9); *diagonal* of the reference and the coarse meshes.", "",
           "## Named variants", "", paper_line, "", *header]

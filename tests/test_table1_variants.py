@@ -102,12 +102,12 @@ def test_samples_between_levels_equal_a_direct_computation(measurer):
     for transfer in ("prolong", "restrict"):
         space = measurer.space(transfer, n)
         t_c, F_c = series.arrays(transfer, "coarse")
-        for sampling in ("hold", "interpolate"):
+        for sampling in ("hold", "hold_next", "interpolate"):
             t, F = series.arrays(transfer, sampling)
             assert np.allclose(t, ref.times)  # every stored reference level, once
             for s, ts in enumerate(t):
                 j, r = divmod(round(ts / K_REF), m)
-                theta = r / m if sampling == "interpolate" else 0.0
+                theta = {"hold": 0.0, "hold_next": float(r > 0), "interpolate": r / m}[sampling]
                 u = levels[j][0] if theta == 0 else (1 - theta) * levels[j][0] + theta * levels[j + 1][0]
                 z = levels[j][1] if theta == 0 else (1 - theta) * levels[j][1] + theta * levels[j + 1][1]
                 bu, bz = space.coarse(u, z)
@@ -137,7 +137,7 @@ def test_study_writes_every_variant(tmp_path):
     result = study(CFG, named, [4, 8], [0.05], 16, 0.025, tmp_path / "cache", log=lambda *_: None)
     assert {r["diagonal"] for r in result["references"]} == {"right", "left"}
     assert all(len(rows) == 2 for rows in result["named"].values())
-    assert len(result["search"]) == 3 * 240  # every measurement-only combination, for each of the three runs
+    assert len(result["search"]) == 3 * 320  # every measurement-only combination, for each of the three runs
     assert result["search"]["default"] == result["named"]["ours"]
     summ = write(result, tmp_path, "test")
     doc = json.loads((tmp_path / "table1_variants.json").read_text())
