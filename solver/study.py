@@ -9,6 +9,9 @@ penetration, whether zeta left [zeta*, 1] before clipping, and the error against
 reference (same scene and mu; Newton, n_ref, k_ref). Writes stability.csv and one heat
 map per method.
 
+``study table1-variants``: which measurement of the error reproduces the paper's Table 1
+(solver/table1_variants.py; writes table1_variants.md, .csv, .json).
+
 ``study work-precision``: error against the reference versus wall time over (n, k) for
 each method and variant on Example 1, with the Pareto front. Writes work_precision.csv
 and work_precision.png.
@@ -22,6 +25,7 @@ import argparse
 import csv
 import json
 import math
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -31,6 +35,7 @@ import numpy as np
 
 from .charts import pyplot
 from .errors import SolveFailure
+from .table1_variants import VARIANTS as T1_VARIANTS
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = {"example1": ROOT / "configs" / "example1.toml", "hard": ROOT / "configs" / "hard.toml"}
@@ -411,6 +416,24 @@ def main(argv: list[str] | None = None) -> int:
     es.add_argument("--ref-n", type=int, default=256, help="mesh of the P2 reference")
     es.add_argument("--p1", type=int, nargs="*", default=[8, 16, 32, 64, 128])
     es.add_argument("--p2", type=int, nargs="*", default=[8, 16, 32, 64])
+    tv = sub.add_parser("table1-variants", help="which measurement reproduces the paper's Table 1 (issue 17)")
+    tv.add_argument("config", nargs="?", default=str(SCENES["example1"]), help="the scene (default: Example 1)")
+    tv.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
+    tv.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache"))
+    tv.add_argument("--ref-n", type=int, default=256)
+    tv.add_argument("--ref-k", type=float, default=0.0005)
+    tv.add_argument("--ns", type=int, nargs="+", help="default: the paper's 4 ... 128")
+    tv.add_argument("--ks", type=float, nargs="+", help="default: the paper's 0.05 ... 0.001")
+    tv.add_argument("--variants", nargs="+", default=list(T1_VARIANTS), choices=list(T1_VARIANTS), metavar="NAME",
+                    help="the named variants to report (default: all of " + ", ".join(T1_VARIANTS) + "); "
+                    "each needs its runs (u0, diagonal)")
+    tv.add_argument("--no-search", action="store_true", help="skip the search over every combination of the "
+                    "measurement-only choices")
     args = p.parse_args(argv)
+    if args.which == "table1-variants":
+        from .table1_variants import main as table1_variants
+
+        args.argv = list(argv if argv is not None else sys.argv[2:])
+        return table1_variants(args)
     return {"stability": stability, "work-precision": work_precision, "orders": orders,
             "estimator": estimator}[args.which](args)
