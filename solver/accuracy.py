@@ -43,6 +43,7 @@ COST_PER_DOF = {1: 1.0, 2: 1.13}  # bench.md: P1 n=128 9.70 ms, P2 n=64 10.94 ms
 N0 = 10  # the coarsest step is T / N0; every step considered is T / (N0 2^j)
 SAFETY = 0.8
 ADAPTED_RATE = {1: 0.49, 2: 1.02}  # error ~ dofs^-rate on Dörfler-adapted meshes (estimator.md, Example 1)
+GROWTH_AT_0 = 1.5  # eta growing more over the run: adapt to its largest level instead of t = 0
 ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
 CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "time.order")
 
@@ -151,6 +152,30 @@ class _Level0:
         self.dofs = self.model.u.function_space.dofmap.index_map.size_global * self.model.u.function_space.dofmap.index_map_bs
 
 
+class _Worst:
+    """A coarse-step run on a mesh (to the scene's T as overridden): eta and eta_K^2 at its level of largest eta
+    (scenes whose load starts at zero have nothing to adapt to at t = 0)."""
+
+    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
+        from .estimator import estimator_for
+        from .stepper import build_model, run
+
+        self.model = model = build_model(_load(path, overrides), comm, geo)
+        est = estimator_for(model)
+        worst: list = [-1.0, None]
+
+        def keep(row):
+            eta2 = est.cells()
+            eta = est.total(eta2)
+            if eta > worst[0]:
+                worst[:] = [eta, eta2]
+
+        run(model, None, on_step=keep)
+        self.eta, self.eta2 = worst
+        imap = model.u.function_space.dofmap.index_map
+        self.dofs = imap.size_global * model.u.function_space.dofmap.index_map_bs
+
+
 def _theta(theta: float, ratio: float) -> float:
     """The Dörfler fraction: ``theta`` near the target; far from it (estimate/target > 4) a larger one, so
     that fewer solve-estimate-refine rounds are needed (each is a mesh to build)."""
@@ -158,10 +183,10 @@ def _theta(theta: float, ratio: float) -> float:
 
 
 def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, theta: float, max_dofs: int,
-           max_steps: int | None, seq: list[dict], log, marked=None) -> tuple[object, np.ndarray | None]:
+           max_steps: int | None, seq: list[dict], log, marked=None, level=None) -> tuple[object, np.ndarray | None]:
     """Dörfler-refine until C eta_0 <= target (or ``max_steps`` meshes solved), appending each mesh's record to
-    ``seq``. ``marked``: (geo, eta2) of a mesh already solved, to refine first. Returns the last mesh and its
-    eta_K^2 (to go on from)."""
+    ``seq``. ``marked``: (geo, eta2) of a mesh already solved, to refine first. ``level``: what is solved on a
+    mesh (:class:`_Level0`, the default, or :class:`_Worst`). Returns the last mesh and its eta_K^2."""
     from .adapt import refine
     from .estimator import dorfler
 
@@ -169,7 +194,7 @@ def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, the
         geo = refine(marked[0], np.flatnonzero(dorfler(marked[1], _theta(theta, seq[-1]["estimate"] / target), comm)))
     solved = 0
     while True:
-        lv = _Level0(path, [*overrides, f"discretization.u_degree={degree}"], comm, geo)
+        lv = (level or _Level0)(path, [*overrides, f"discretization.u_degree={degree}"], comm, geo)
         rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                "estimate": C * lv.eta, "_geo": lv.model.geo}
         seq.append(rec)
@@ -309,7 +334,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     order = _order(path, base)
     T = cfg.time.T
     k0 = T / N0
-    base = [*base, f"time.order={order}", f"time.k={k0!r}"]
+    base = [*base, f"time.order={order}"]
     geo0 = build(comm, _load(path, base).mesh, cfg.boundaries, cfg.dim)
     E = cfg.material.E
     Cs = {d: C_TIMES_E[d] / E for d in acc.degrees}
@@ -321,27 +346,14 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     share_s = acc.space_share * tol
     share_t = (1.0 - acc.space_share) * tol
 
-    # 1. the degree: one t = 0 solve of each on the start mesh, the dofs each needs by the adapted rate
-    seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
-    last: dict[int, tuple] = {}
-    cost = {}
-    for d in acc.degrees:
-        last[d] = _adapt(path, base, comm, geo0, d, Cs[d], share_s, acc.theta, acc.max_dofs, 1, seqs[d], log)
-        first = seqs[d][0]
-        needed = first["dofs"] * max(first["estimate"] / share_s, 1.0) ** (1.0 / ADAPTED_RATE[d])
-        cost[d] = COST_PER_DOF[d] * needed
-    degree = min(acc.degrees, key=lambda d: cost[d])
-    log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in acc.degrees)
-        + f" -> P{degree}")
-    chosen = [*base, f"discretization.u_degree={degree}"]
-
-    # 2. on the start mesh: the step (step doubling), the growth of eta over the run, zeta's space error
+    # 1. on the start mesh, with the highest degree: the step (step doubling) and how eta evolves over the run
+    pilot = [*base, f"discretization.u_degree={max(acc.degrees)}"]
     pilots = []
     for j in range(3):
         kj = k0 / 2**j
         for _ in range(6):  # a start step the scheme cannot take is halved
             try:
-                pilots.append(_Pilot(path, [*chosen, f"time.k={kj!r}"], comm, geo0, estimate=(j == 0)))
+                pilots.append(_Pilot(path, [*pilot, f"time.k={kj!r}"], comm, geo0, estimate=(j == 0)))
                 break
             except SolveFailure:
                 k0 /= 2
@@ -351,8 +363,9 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
             raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
     p, e_k4, ts, profile = _time_estimate(pilots, order, comm)
     eta = np.array(pilots[0].eta)
-    growth = float(eta.max() / eta[0]) if eta[0] > 0 else 1.0
-    log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3f} over the run")
+    worst = int(np.argmax(eta))
+    growth = float(eta[worst] / eta[0]) if eta[0] > 0 else math.inf
+    log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} over the run")
     j = 0
     k4 = k0 / 4
     while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share_t:
@@ -361,21 +374,45 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
             raise ToleranceError(tol, e_k4, 0, "time.k")
     k = k0 / 2**j
     scale = (k / k4) ** p if e_k4 > 0 else 0.0
+    base_full = [*base, f"time.k={k0!r}"]
+    # the space estimate: the t = 0 problem times the growth, or, where eta grows more than GROWTH_AT_0 (a load
+    # that starts small), coarse-step runs to the level of largest eta (their largest eta counts)
+    base = [*base, f"time.k={k0!r}"]
+    level, g = _Level0, growth
+    if growth > GROWTH_AT_0:
+        level, g = _Worst, 1.0
+        base = [*base, f"time.T={pilots[0].t[worst]!r}"]
+        log(f"  the mesh is adapted to the level of largest eta, t = {pilots[0].t[worst]:g}")
+
+    # 2. the degree: one solve of each on the start mesh; the dofs each needs by the adapted rate
+    seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
+    last: dict[int, tuple] = {}
+    cost = {}
+    for d in acc.degrees:
+        last[d] = _adapt(path, base, comm, geo0, d, Cs[d], share_s / g, acc.theta, acc.max_dofs, 1, seqs[d], log,
+                         level=level)
+        first = seqs[d][0]
+        needed = first["dofs"] * max(first["estimate"] * g / share_s, 1.0) ** (1.0 / ADAPTED_RATE[d])
+        cost[d] = COST_PER_DOF[d] * needed
+    degree = min(acc.degrees, key=lambda d: cost[d])
+    log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in acc.degrees)
+        + f" -> P{degree}")
+    chosen = [*base, f"discretization.u_degree={degree}"]
 
     # 3. the mesh: adapt the chosen degree on until C eta_0 growth + zeta's part is within the space share
-    target = (1.0 - ZETA_SHARE) * share_s / max(growth, 1.0)
+    target = (1.0 - ZETA_SHARE) * share_s / max(g, 1.0)
     geo, eta2 = last[degree]
     if seqs[degree][-1]["estimate"] > target:  # go on from the probe's last mesh
         geo, _ = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
-                        seqs[degree], log, marked=(geo, eta2))
+                        seqs[degree], log, marked=(geo, eta2), level=level)
     best = seqs[degree][-1]
     # 4. zeta's space error on the chosen mesh (against an earlier mesh of the sequence with at most a quarter
     # of its cells, or its uniform refinement); refined uniformly while the two space parts exceed the share
-    run_k0 = [*chosen, f"time.k={k0!r}"]
+    run_k0 = [*base_full, f"discretization.u_degree={degree}"]
     earlier = [r["_geo"] for r in seqs[degree] if "_geo" in r and r["cells"] * 4 <= best["cells"]]
     zeta_space, finer = _zeta_space(path, run_k0, comm, geo, earlier[-1] if earlier else None)
     log(f"  zeta's space error on it <= {zeta_space:.3e}")
-    while best["estimate"] * max(growth, 1.0) + zeta_space > share_s:
+    while best["estimate"] * max(g, 1.0) + zeta_space > share_s:
         if finer is None:
             zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
             continue
@@ -383,13 +420,13 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
             raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)")
         geo = finer
         zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
-        lv = _Level0(path, chosen, comm, geo)
+        lv = level(path, chosen, comm, geo)
         best = {"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                 "estimate": Cs[degree] * lv.eta, "uniform": True}
         seqs[degree].append(best)
         log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {best['estimate']:.3e}, zeta's space error <= "
             f"{zeta_space:.3e}")
-    estimate = {"space_u": best["estimate"] * max(growth, 1.0), "space_zeta": zeta_space, "time": e_k4 * scale}
+    estimate = {"space_u": best["estimate"] * max(g, 1.0), "space_zeta": zeta_space, "time": e_k4 * scale}
     out = Plan(tol, degree, order, k, geo, start, estimate, Cs[degree], growth, p, (ts, profile * scale),
                [r for d in acc.degrees for r in seqs[d]])
     out.seconds = time.perf_counter() - t_start

@@ -36,6 +36,7 @@ SCENES = {
 }
 TOLS = (1e-2, 3e-3, 1e-3)
 QUIET = ["output.xdmf=false"]
+MAX_DOFS = 400_000  # per run of the study (the tolerance runs' accuracy.max_dofs, and the uniform meshes)
 
 
 class Reference:
@@ -47,8 +48,8 @@ class Reference:
         from .stepper import build_model, run
 
         t0 = time.perf_counter()
-        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]"], MPI.COMM_SELF,
-                 log=lambda *a: None)
+        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
+                        f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
         self.k = p.k / refine_k
         cfg = load(path, [*overrides, *QUIET, *p.overrides, f"time.k={self.k!r}"])
         self.model = model = build_model(cfg, MPI.COMM_SELF, p.geo)
@@ -137,6 +138,8 @@ def uniform_sweep(ref: Reference, path: Path, overrides: list[str], tols, levels
                     cfg = load(path, [*overrides, *QUIET, *mesh_over, f"discretization.u_degree={degree}",
                                       f"time.order={order}", f"time.k={k!r}"])
                     model = build_model(cfg, MPI.COMM_SELF, geo)
+                    if model.u.x.array.size > MAX_DOFS:
+                        break
                     rec = ref.measure(model)
                     rec.update({"degree": degree, "order": order, "mesh": label, "k": k})
                     rows.append(rec)
@@ -157,10 +160,16 @@ def tolerance_run(ref: Reference, path: Path, overrides: list[str], tol: float, 
     """Plan and run at ``tol``; the error against the reference, the cost (planning + loop) and the estimate."""
     from .accuracy import ErrorSensor, plan
     from .config import load
+    from .errors import ToleranceError
     from .stepper import build_model
 
     t0 = time.perf_counter()
-    p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}"], MPI.COMM_SELF, log=lambda *a: None)
+    try:
+        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF,
+                 log=lambda *a: None)
+    except ToleranceError as exc:
+        log(f"  TOL {tol:g}: out of reach ({exc})")
+        return {"tolerance": tol, "out_of_reach": str(exc), "planning_seconds": time.perf_counter() - t0}
     planning = time.perf_counter() - t0
     cfg = load(path, [*overrides, *QUIET, f"accuracy.tolerance={tol!r}", *p.overrides])
     model = build_model(cfg, MPI.COMM_SELF, p.geo)
@@ -183,10 +192,18 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
     for name in scenes:
         path, overrides = SCENES[name]
         log(f"{name}:")
-        ref = Reference(path, overrides, ref_tol, 4, log=log)
-        second = Reference(path, overrides, 3 * ref_tol, 2, log=log)
         from .config import load
+        from .errors import ToleranceError
         from .stepper import build_model
+
+        try:
+            ref = Reference(path, overrides, ref_tol, 4, log=log)
+            second = Reference(path, overrides, 3 * ref_tol, 2, log=log)
+        except ToleranceError as exc:
+            log(f"  no reference: {exc}")
+            result["scenes"][name] = {"reference": {"failure": str(exc)}, "runs": [], "uniform": []}
+            _write(result, out)
+            continue
 
         cfg2 = load(path, [*overrides, *QUIET, *second.plan.overrides, f"time.k={second.k!r}"])
         ref_check = ref.measure(build_model(cfg2, MPI.COMM_SELF, second.plan.geo))
@@ -195,6 +212,9 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
         runs = []
         for tol in tols:
             rec = tolerance_run(ref, path, overrides, tol, log=log)
+            if "out_of_reach" in rec:
+                runs.append(rec)
+                continue
             best = cheapest(uniform, tol)
             rec["uniform_best"] = None if best is None else {key: best[key] for key in
                                                             ("degree", "order", "mesh", "k", "error", "cost", "dofs")}
@@ -209,9 +229,14 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
 
 
 def _write(result: dict, out: Path) -> None:
-    rows = []
+    rows, unreached = [], []
     for name, sc in result["scenes"].items():
+        if "failure" in sc["reference"]:
+            unreached.append((name, None, "no reference: " + sc["reference"]["failure"]))
         for r in sc["runs"]:
+            if "out_of_reach" in r:
+                unreached.append((name, r["tolerance"], r["out_of_reach"]))
+                continue
             b = r["uniform_best"] or {}
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
                          "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
@@ -221,15 +246,16 @@ def _write(result: dict, out: Path) -> None:
                          "uniform_mesh": b.get("mesh"), "uniform_k": b.get("k"), "uniform_error": b.get("error"),
                          "uniform_cost": b.get("cost"),
                          "cost_ratio": r["cost"] / b["cost"] if b else None, "failure": r["failure"]})
-    with open(out / "tolerance.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+    if rows:
+        with open(out / "tolerance.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
     (out / "tolerance.json").write_text(json.dumps(result, indent=1, default=str))
-    (out / "tolerance.md").write_text(markdown(result, rows))
+    (out / "tolerance.md").write_text(markdown(result, rows, unreached))
 
 
-def markdown(result: dict, rows: list[dict]) -> str:
+def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     lines = ["# Tolerance runs against a fine reference (`python -m solver study tolerance`)", "",
              "| scene | TOL | achieved error | error / TOL | estimate | chosen | cost (s) | cheapest uniform meeting TOL "
              "| its cost (s) | cost / uniform |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -248,12 +274,17 @@ def markdown(result: dict, rows: list[dict]) -> str:
               "|---|---|---|---|---|---|---|"]
     for name, sc in result["scenes"].items():
         r = sc["reference"]
+        if "failure" in r:
+            continue
         lines.append(f"| {name} | {r['cells']} | {r['dofs']} | {r['k']:g} | {r['estimate']:.2e} "
                      f"| {r['second_vs_first']:.2e} | {r['seconds']:.1f} |")
     n = len(rows)
     ok = sum(r["error"] <= r["tolerance"] for r in rows)
     tight = sum(r["error"] >= 0.2 * r["tolerance"] for r in rows)
     within = sum(r["cost_ratio"] is not None and r["cost_ratio"] <= 2 for r in rows)
+    if unreached:
+        lines += ["", f"Refused as out of reach within {MAX_DOFS} displacement dofs (a one-line error for a user):", ""]
+        lines += [f"- {name}" + (f", TOL {tol:g}" if tol is not None else "") + f": {why}" for name, tol, why in unreached]
     lines += ["", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. "
               f"Cost within 2x of the cheapest uniform choice: {within} of {n}.", ""]
     return "\n".join(lines)
@@ -267,9 +298,11 @@ def chart(result: dict, out: Path) -> None:
         return
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
     for name, sc in result["scenes"].items():
-        tol = [r["tolerance"] for r in sc["runs"]]
-        a.loglog(tol, [r["error"] for r in sc["runs"]], "o-", label=name)
-        pairs = [(r["uniform_best"]["cost"], r["cost"]) for r in sc["runs"] if r["uniform_best"]]
+        done = [r for r in sc["runs"] if "error" in r]
+        if not done:
+            continue
+        a.loglog([r["tolerance"] for r in done], [r["error"] for r in done], "o-", label=name)
+        pairs = [(r["uniform_best"]["cost"], r["cost"]) for r in done if r["uniform_best"]]
         if pairs:
             b.loglog(*zip(*pairs), "o", label=name)
     t = np.array([min(result["tolerances"]) / 2, max(result["tolerances"]) * 2])
