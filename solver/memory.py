@@ -96,23 +96,35 @@ class QuadratureEvaluator:
 
 
 class MemorySource:
-    """H = zeta Phi_L(A eps(u)) at the rule's points, as a sparse matvec and numpy.
+    """H = zeta Phi_L(A eps(u)) at the rule's points, as one sparse matvec and a few numpy passes.
 
     eps(u) at the points is a fixed linear map of u's dofs: it is tabulated once (an
-    Expression with a trial function) into a sparse matrix, and so is zeta at the points.
-    Each call is then two sparse products and a few vectorized operations, a fraction of
-    the cost of re-running the Expression kernel over all cells. Equal to the UFL
-    expression ``memory_source`` (tested), which remains the definition.
+    Expression with a trial function) into a sparse matrix ``E`` that gives the d(d+1)/2
+    independent components of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one
+    block of rows per component: 24 entries per point for P2 triangles, where the full
+    d*d tensor took 36. zeta at the points is a second, small product. A eps, the
+    truncation (skipped when no value reaches L: it is then the identity) and the factor
+    zeta act on the compact components; only the result is written out in the quadrature
+    space's d*d layout. Equal to the UFL expression ``memory_source`` (tested), which
+    remains the definition, and bit for bit equal to the full-tensor product it replaces.
+
+    The strain is linear in u, so H at an extrapolated u* = 2 u - u_prev follows from the
+    strains of u and u_prev (:meth:`extrapolated`): with ``keep`` > 0 the last ``keep``
+    strains of the field's values are kept, each with a copy of the values it belongs to, and
+    reused when asked for the same values again (an exact comparison: after a restart, or for
+    a u that changed, they are computed again).
     """
 
     def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
-                 L: float) -> None:
+                 L: float, keep: int = 0) -> None:
         import scipy.sparse as sp
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
         self.u, self.zeta, self.L, self.d = u, zeta, L, d
         self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
+        self.keep = keep
+        self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
         cells = rule.cells
         npts = rule.points.shape[0]
         rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
@@ -123,6 +135,7 @@ class MemorySource:
             return vals.reshape(len(cells), npts, -1, space.dofmap.dof_layout.num_dofs)
 
         size_q = self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts
+        self.size_q = size_q
 
         def nodes_of(space) -> np.ndarray:
             return space.dofmap.list.array.reshape(-1, space.dofmap.dof_layout.num_dofs)[: len(cells)]
@@ -135,17 +148,20 @@ class MemorySource:
         nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
         bs = V.dofmap.index_map_bs
         size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+        self.pairs = [(i, i) for i in range(d)] + [(i, j) for i in range(d) for j in range(i + 1, d)]
         rows, cols, vals = [], [], []
-        for i in range(d):
-            for j in range(d):
-                r = (rows_q * d * d + i * d + j)[:, :, None]  # (cell, point, 1)
-                for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
-                    v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
-                    rows.append(np.broadcast_to(r, v.shape).ravel())
-                    cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
-                    vals.append(v.ravel())
-        self.G = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                               shape=(size_q * d * d, size_v)).tocsr()  # duplicates (i == j) are summed
+        for c, (i, j) in enumerate(self.pairs):
+            r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
+            for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
+                v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
+                rows.append(np.broadcast_to(r, v.shape).ravel())
+                cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
+                vals.append(v.ravel())
+        # duplicates (i == j: two halves) are summed exactly; rows sorted by column, as the full tensor's were
+        self.E = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(len(self.pairs) * size_q, size_v)).tocsr()
+        self._work = np.empty((2, len(self.pairs), size_q))  # the extrapolated strain, A eps
+        self._trace = np.empty(size_q)
         self.Zq = None
         if isinstance(zeta, fem.Function):
             Z = zeta.function_space
@@ -155,24 +171,66 @@ class MemorySource:
             nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
             self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
 
+    def full_operator(self):
+        """The strain operator of the full d*d tensor (rows point-major, (i, j) row-major): eps_ij and eps_ji
+        share the rows of E."""
+        d, n = self.d, self.size_q
+        index = {}
+        for c, (i, j) in enumerate(self.pairs):
+            index[i, j] = index[j, i] = c
+        comp = np.array([index[i, j] for i in range(d) for j in range(d)])
+        return self.E[(comp[None, :] * n + np.arange(n)[:, None]).ravel()]
+
+    def strain(self, u: np.ndarray | None = None) -> np.ndarray:
+        """The independent components of eps(u) at the points, (component, point); u: the field's values by default.
+
+        Only strains of the field's own values are kept (the last ``keep`` of them, in the order computed);
+        one of another array is found among them or computed. The result may be a kept array: read it,
+        never change it."""
+        own = u is None
+        u = self.u.x.array if own else u
+        for values, eps in self._cache:
+            if np.array_equal(values, u):
+                return eps
+        eps = (self.E @ u).reshape(len(self.pairs), -1)
+        if self.keep and own:
+            self._cache.insert(0, (u.copy(), eps))
+            del self._cache[self.keep:]
+        return eps
+
     def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        """H at the points, in the quadrature space's layout (in place on one temporary)."""
-        flat = self.G @ self.u.x.array  # eps, (point, i, j) flattened
-        e = flat.reshape(-1, self.d * self.d)
-        diag = list(range(0, self.d * self.d, self.d + 1))
-        tr = e[:, diag].sum(axis=1)
+        """H at the points for the current u and zeta, in the quadrature space's layout."""
+        return self._source(self.strain(), out)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """H at u* = 2 u - u_prev and the current zeta: eps(u*) = 2 eps(u) - eps(u_prev), exactly (to round-off),
+        from the kept strains (or a product where one is missing)."""
+        eps = np.multiply(self.strain(), 2.0, out=self._work[0])
+        eps -= self.strain(u_prev)
+        return self._source(eps, out)
+
+    def zeta_at_points(self) -> np.ndarray | float:
+        return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        """zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
+        d = self.d
+        a = np.multiply(eps, 2.0 * self.lame_mu, out=self._work[1])  # A eps = 2 mu eps + lambda tr(eps) I
+        tr = np.add(eps[0], eps[1], out=self._trace)
+        for i in range(2, d):
+            tr += eps[i]
         tr *= self.lame_lambda
-        e *= 2.0 * self.lame_mu
-        for i in diag:
-            e[:, i] += tr
-        np.clip(flat, -self.L, self.L, out=flat)
-        if self.Zq is not None:
-            e *= (self.Zq @ self.zeta.x.array)[:, None]
-        else:
-            flat *= float(self.zeta.value)
+        a[:d] += tr
+        if a.max() > self.L or a.min() < -self.L:  # the truncation acts (NaN: skipped, and kept, like clip's)
+            np.clip(a, -self.L, self.L, out=a)
+        a *= self.zeta_at_points()
         if out is None:
-            return flat
-        out[:] = flat
+            out = np.empty(self.size_q * d * d)
+        full = out.reshape(-1, d * d)
+        for c, (i, j) in enumerate(self.pairs):
+            full[:, i * d + j] = a[c]
+            if i != j:
+                full[:, j * d + i] = a[c]
         return out
 
 
@@ -186,7 +244,7 @@ class MemoryForce:
     of each point of an owned cell (0 on ghost cells, whose owners add their part). So B M
     is G^T (W M): G has fewer entries (the symmetric halves merged), and the product runs in
     scipy on the local arrays, followed by one reverse scatter. Equal to B M to round-off
-    (tested).
+    (tested). G is the source's full-tensor strain operator (:meth:`MemorySource.full_operator`).
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
@@ -207,7 +265,7 @@ class MemoryForce:
         nodes = source.Q.dofmap.list.array.reshape(-1, npts)[:n_owned]
         w = np.zeros(size_q)
         w[nodes.ravel()] = weights.ravel()
-        self.GW = (source.G.T @ sp.diags(np.repeat(w, d * d))).tocsr()
+        self.GW = (source.full_operator().T @ sp.diags(np.repeat(w, d * d))).tocsr()
 
     def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
         """out = B M (owned entries; ``out`` a ghosted vector of u's space)."""
@@ -221,23 +279,30 @@ class OutOfPlaneSource:
 
     In plane strain eps_33 = 0, so (A eps)_33 = lambda (eps_11 + eps_22); Phi_L truncates
     componentwise, so the 33 entry of the truncated tensor is the truncated 33 entry.
-    Uses the strain operator of the in-plane :class:`MemorySource`.
+    Uses the strain of the in-plane :class:`MemorySource`, which keeps its last one for it.
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
         self.source = source
+        source.keep = max(source.keep, 1)  # the in-plane commit's strain, read again here
         self.Q = rule.space(())
 
     def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        src, d = self.source, self.source.d
-        e = (src.G @ src.u.x.array).reshape(-1, d * d)
-        h = e[:, list(range(0, d * d, d + 1))].sum(axis=1)
+        return self._source(self.source.strain(), out)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
+        src = self.source
+        eps = 2.0 * src.strain()[:2]
+        eps -= src.strain(u_prev)[:2]
+        return self._source(eps, out)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        src = self.source
+        h = eps[0] + eps[1]
         h *= src.lame_lambda
         np.clip(h, -src.L, src.L, out=h)
-        if src.Zq is not None:
-            h *= src.Zq @ src.zeta.x.array
-        else:
-            h *= float(src.zeta.value)
+        h *= src.zeta_at_points()
         if out is None:
             return h
         out[:] = h
@@ -252,6 +317,10 @@ class History:
 
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
+        raise NotImplementedError
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """The current level's term at u* = 2 u - u_prev (``extrapolated`` histories only)."""
         raise NotImplementedError
 
     def state(self) -> dict[str, np.ndarray]:
@@ -276,6 +345,12 @@ class PronyHistory(History):
         self.trapezoid = trapezoid or extrapolated
         self.extrapolated = extrapolated
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
+        if extrapolated:  # H(u*) from the strains of u_{n-1} and u_{n-2}, kept by the source
+            if not hasattr(source, "extrapolated"):
+                raise TypeError(f"the extrapolated trapezoid needs a source with extrapolated(): {type(source).__name__}")
+            if hasattr(source, "keep"):
+                source.keep = max(source.keep, 2)
+        self._h = np.empty_like(self.M.x.array)  # H of a level, then its increment (no temporaries per step)
         # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
         self.current_weight: fem.Constant | None = None
         self.g0 = float(np.sum(weights))
@@ -287,21 +362,22 @@ class PronyHistory(History):
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
 
     def commit(self, n: int) -> None:
-        h = self.H()
+        h = self.H(self._h)
         if self.trapezoid and n == 0:
             h *= 0.5
         if self.current_weight is not None:
             self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
-            m += (self.k * self.weights[0]) * h
+            m += np.multiply(h, self.k * self.weights[0], out=h)
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
             return
         total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
+        step = np.empty_like(h)
         for term, c, e in zip(self.terms, self.weights, self.decay):
-            term += (self.k * c) * h
+            term += np.multiply(h, self.k * c, out=step)
             term *= e
             total += term
 
@@ -309,6 +385,11 @@ class PronyHistory(History):
         """M_n = P_n + (k/2) g(0) h, with h = H at the extrapolated level n (``extrapolated`` only)."""
         np.multiply(h, 0.5 * self.k * self.g0, out=self.M.x.array)
         self.M.x.array[:] += self.P
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """M_n = P_n + (k/2) g(0) H(u*, zeta), u* = 2 u - u_prev with u the field's values (u_{n-1}); u_prev None:
+        u* = u (``extrapolated`` only). u itself is not changed."""
+        self.set_current(self.H(self._h) if u_prev is None else self.H.extrapolated(u_prev, self._h))
 
     def state(self) -> dict[str, np.ndarray]:
         out = {"M": self.M.x.array}
@@ -366,6 +447,11 @@ class PlaneStrainHistory(History):
         """The extrapolated trapezoid's current term for both (H_33 evaluated at the same, extrapolated, u)."""
         self.main.set_current(h)
         self.out_of_plane.set_current(self.out_of_plane.H())
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """The extrapolated trapezoid's current term for both, at the same u*."""
+        self.main.extrapolate(u_prev)
+        self.out_of_plane.extrapolate(u_prev)
 
     def state(self) -> dict[str, np.ndarray]:
         return {**self.main.state(), **{f"zz_{k}": v for k, v in self.out_of_plane.state().items()}}

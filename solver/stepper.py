@@ -132,7 +132,7 @@ class Stepper:
                     dinfo = model.damage.correct_first_step()
                     clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
                 if model.u_prev is not None:
-                    model.history.set_current(model.history.H())
+                    model.history.extrapolate(None)  # H(u_1, zeta_1), both predicted
                 again = model.mech.solve(t)
                 again.iterations += info.iterations
                 again.linear_solves += info.linear_solves
@@ -157,16 +157,12 @@ class Stepper:
         return row
 
     def _extrapolated_memory(self, n: int) -> None:
-        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); u keeps u_{n-1}."""
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); then u_prev = u_{n-1}.
+
+        H(u*) comes from the strains of u_{n-1} (just committed) and u_{n-2} by linearity: no third product."""
         model = self.model
-        u, u_prev = model.u.x.array, model.u_prev.x.array
-        last = u.copy()
-        if n >= 2:
-            u *= 2.0
-            u -= u_prev
-        model.history.set_current(model.history.H())
-        u[:] = last
-        u_prev[:] = last
+        model.history.extrapolate(model.u_prev.x.array if n >= 2 else None)
+        model.u_prev.x.array[:] = model.u.x.array
 
     def _check_finite(self) -> None:
         model = self.model
