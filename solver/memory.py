@@ -435,6 +435,7 @@ class PlaneStrainHistory(History):
     def __init__(self, main: History, out_of_plane: History) -> None:
         self.main, self.out_of_plane = main, out_of_plane
         self.M33 = out_of_plane.M
+        self.extrapolated = main.extrapolated  # History's class default (False) would hide the main one's
 
     def __getattr__(self, name: str):
         return getattr(self.main, name)

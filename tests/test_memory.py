@@ -230,3 +230,49 @@ def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
 
     assert level0(rule, 0.1) == pytest.approx(level0("left", 0.1), rel=1e-12)
     assert level0(rule, 0.05) == pytest.approx(level0("left", 0.1), rel=1e-12)
+
+
+@pytest.mark.parametrize("model_name", ["plane_stress", "plane_strain"])
+def test_extrapolated_current_term_is_its_definition(comm, model_name):
+    """time.order = 2, P2: after level n >= 2, M_n = P_n + (k/2) g(0) zeta_n Phi_L(A eps(u*)), u* = 2 u_{n-1} - u_{n-2},
+    against the UFL definition with the truncation acting; in plane strain M_33 likewise with (A eps)_33 =
+    lambda tr eps (the extrapolated term was once never set there: M stayed 0)."""
+    from conftest import ROOT
+
+    from solver.config import load
+    from solver.stepper import Stepper, build_model
+
+    L, k = 5.0, 0.1
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=3", "mesh.ny=3", "discretization.u_degree=2", "time.order=2",
+                                                f"time.k={k}", "time.T=0.5", f"memory.L={L}",
+                                                f"material.model='{model_name}'"])
+    model = build_model(cfg, comm)
+    hist = model.history
+    assert hist.extrapolated and model.u_prev is not None
+    main = hist.main if model_name == "plane_strain" else hist
+    E, nu = cfg.material.E, cfg.material.nu
+    lam = lame(E, nu, model_name)[0]
+    ustar = fem.Function(model.u.function_space)
+    rule = model.rule
+    ref = rule.evaluator(memory_source(ustar, model.zeta, lambda e: elasticity(e, E, nu, model_name), L),
+                         main.M.function_space)
+    raw = rule.evaluator(elasticity(strain(ustar), E, nu, model_name), main.M.function_space)
+    ref33 = rule.evaluator(model.zeta * ufl.max_value(-L, ufl.min_value(L, lam * ufl.tr(strain(ustar)))), rule.space(()))
+    weight = 0.5 * k * main.g0
+    stepper = Stepper(model)
+    us, acted = [], False
+    for n in range(5):
+        stepper.step(n)
+        if n >= 2:
+            ustar.x.array[:] = 2.0 * us[n - 1] - us[n - 2]
+            want = main.P + weight * ref()
+            assert np.allclose(main.M.x.array, want, rtol=1e-12, atol=1e-12 * np.abs(want).max()), n
+            acted |= comm.allreduce(np.abs(raw()).max(), op=MPI.MAX) > L
+            if model_name == "plane_strain":
+                zz = hist.out_of_plane
+                want33 = zz.P + weight * ref33()
+                assert np.allclose(zz.M.x.array, want33, rtol=1e-12, atol=1e-12 * np.abs(want33).max()), n
+                assert comm.allreduce(np.abs(zz.M.x.array).max(), op=MPI.MAX) > 0.0
+        us.append(model.u.x.array.copy())
+    assert acted
+
