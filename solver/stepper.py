@@ -167,15 +167,24 @@ class Stepper:
     def _check_finite(self) -> None:
         model = self.model
         bad = []
-        if not np.all(np.isfinite(model.u.x.array)):
+        if not _all_finite(model.u.x.array):
             bad.append("displacement")
-        if model.damage is not None and not np.all(np.isfinite(model.damage.zeta.x.array)):
+        if model.damage is not None and not _all_finite(model.damage.zeta.x.array):
             bad.append("damage")
-        if model.history is not None and not np.all(np.isfinite(model.history.M.x.array)):
+        if model.history is not None and not _all_finite(model.history.M.x.array):
             bad.append("memory")
         bad = model.comm.allreduce(bad, op=MPI.SUM)
         if bad:
             raise NonFiniteError(bad)
+
+
+def _all_finite(a: np.ndarray) -> bool:
+    """Whether every entry is finite: their sum is finite only if they all are (one pass, no temporary); a sum that
+    is not (an entry that is not, or an overflow of finite ones) is settled entry by entry."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(a)):
+            return True
+    return bool(np.all(np.isfinite(a)))
 
 
 def writes_level(n: int, steps: int, every: int) -> bool:
