@@ -300,3 +300,15 @@ def test_extrapolated_source_from_kept_strains(comm, keep):
     assert len(fast._cache) == keep
     raw = rule.evaluator(A(strain(ustar)), fast.Q)()
     assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > L
+
+
+def test_equal_is_exact():
+    """The kept-strain lookup's comparison: a sample first, then every entry."""
+    from solver.memory import _equal
+
+    a = np.arange(1000.0)
+    b = a.copy()
+    assert _equal(a, b)
+    b[7] += 1e-13  # off the sample
+    assert not _equal(a, b)
+    assert not _equal(a, a[:-1]) and _equal(a[:0], b[:0])
