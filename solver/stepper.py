@@ -194,13 +194,17 @@ def writes_level(n: int, steps: int, every: int) -> bool:
 
 
 def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
-        restart: bool = False) -> list[dict]:
+        restart: bool = False, sensors: tuple = ()) -> list[dict]:
     """Run the model's scene; write results to ``outdir`` (None: nothing written). Returns the rows.
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
     after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
     it, and the new levels are appended. A write that fails (a full disk) stops the run with
     an OutputError that knows the step; what was written before stays readable.
+
+    ``sensors``: objects with ``columns`` and ``sensor(row) -> dict`` that add their columns to
+    every level's row and the CSV (e.g. the error estimates of a tolerance run); their time
+    counts as diagnostics.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
@@ -214,7 +218,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
     levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
     out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
-    columns = CSV_COLUMNS + model.mech.diagnostics.columns
+    columns = CSV_COLUMNS + model.mech.diagnostics.columns + tuple(c for s in sensors for c in s.columns)
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
@@ -223,6 +227,11 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     try:
         for n in range(start, steps + 1):
             row = stepper.step(n)
+            if sensors:
+                t0 = time.perf_counter()
+                for sensor in sensors:
+                    row.update(sensor(row))
+                row["time_diagnostics"] += time.perf_counter() - t0
             try:
                 t0 = time.perf_counter()
                 if writes_level(n, steps, cfg.output.every):
