@@ -177,6 +177,10 @@ class MemorySource:
             nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
             self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
 
+    def forget(self) -> None:
+        """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
+        self._cache.clear()
+
     def strain(self, u: np.ndarray | None = None) -> np.ndarray:
         """The independent components of eps(u) at the points, (component, point); u: the field's values by default.
 
