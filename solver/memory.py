@@ -198,22 +198,26 @@ class MemorySource:
             del self._cache[self.keep:]
         return eps
 
-    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        """H at the points for the current u and zeta, in the quadrature space's layout."""
-        return self._source(self.strain(), out)
+    fused = True  # takes scale and add: a history adds scale * H in one pass over the compact components
 
-    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """H at u* = 2 u - u_prev and the current zeta: eps(u*) = 2 eps(u) - eps(u_prev), exactly (to round-off),
-        from the kept strains (or a product where one is missing)."""
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, add: bool = False) -> np.ndarray:
+        """scale * H at the points for the current u and zeta, in the quadrature space's layout; with ``add``
+        added to ``out``."""
+        return self._source(self.strain(), out, scale, add)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     add: bool = False) -> np.ndarray:
+        """H at u* = 2 u - u_prev and the current zeta (as :meth:`__call__`): eps(u*) = 2 eps(u) - eps(u_prev),
+        exactly (to round-off), from the kept strains (or a product where one is missing)."""
         eps = np.multiply(self.strain(), 2.0, out=self._work[0])
         eps -= self.strain(u_prev)
-        return self._source(eps, out)
+        return self._source(eps, out, scale, add)
 
     def zeta_at_points(self) -> np.ndarray | float:
         return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
 
-    def _source(self, eps: np.ndarray, out: np.ndarray | None) -> np.ndarray:
-        """zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0, add: bool = False) -> np.ndarray:
+        """scale zeta Phi_L(A eps) from the compact strain, written out (or added) as the full d*d tensor."""
         d = self.d
         a = np.multiply(eps, 2.0 * self.lame_mu, out=self._work[1])  # A eps = 2 mu eps + lambda tr(eps) I
         tr = np.add(eps[0], eps[1], out=self._trace)
@@ -223,14 +227,17 @@ class MemorySource:
         a[:d] += tr
         if a.max() > self.L or a.min() < -self.L:  # the truncation acts (NaN: skipped, and kept, like clip's)
             np.clip(a, -self.L, self.L, out=a)
-        a *= self.zeta_at_points()
+        z = self.zeta_at_points()
+        a *= z * scale if scale != 1.0 else z
         if out is None:
-            out = np.empty(self.size_q * d * d)
+            out, add = np.empty(self.size_q * d * d), False
         full = out.reshape(-1, d * d)
         for c, (i, j) in enumerate(self.pairs):
-            full[:, i * d + j] = a[c]
-            if i != j:
-                full[:, j * d + i] = a[c]
+            for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
+                if add:
+                    full[:, col] += a[c]
+                else:
+                    full[:, col] = a[c]
         return out
 
 
@@ -298,25 +305,33 @@ class OutOfPlaneSource:
         source.keep = max(source.keep, 1)  # the in-plane commit's strain, read again here
         self.Q = rule.space(())
 
-    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        return self._source(self.source.strain(), out)
+    fused = True
 
-    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, add: bool = False) -> np.ndarray:
+        """scale * H_33 (as :meth:`MemorySource.__call__`)."""
+        return self._source(self.source.strain(), out, scale, add)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     add: bool = False) -> np.ndarray:
         """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
         src = self.source
         eps = 2.0 * src.strain()[:2]
         eps -= src.strain(u_prev)[:2]
-        return self._source(eps, out)
+        return self._source(eps, out, scale, add)
 
-    def _source(self, eps: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0, add: bool = False) -> np.ndarray:
         src = self.source
         h = eps[0] + eps[1]
         h *= src.lame_lambda
         np.clip(h, -src.L, src.L, out=h)
-        h *= src.zeta_at_points()
+        z = src.zeta_at_points()
+        h *= z * scale if scale != 1.0 else z
         if out is None:
             return h
-        out[:] = h
+        if add:
+            out += h
+        else:
+            out[:] = h
         return out
 
 
@@ -373,17 +388,24 @@ class PronyHistory(History):
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
 
     def commit(self, n: int) -> None:
-        h = self.H(self._h)
-        if self.trapezoid and n == 0:
-            h *= 0.5
+        half = 0.5 if self.trapezoid and n == 0 else 1.0
         if self.current_weight is not None:
             self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
-            m += np.multiply(h, self.k * self.weights[0], out=h)
+            if getattr(self.H, "fused", False):  # m += k c H, added by the source in one pass
+                self.H(m, scale=half * self.k * self.weights[0], add=True)
+            else:
+                h = self.H(self._h)
+                if half != 1.0:
+                    h *= half
+                m += np.multiply(h, self.k * self.weights[0], out=h)
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
             return
+        h = self.H(self._h)
+        if half != 1.0:
+            h *= half
         total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
         step = np.empty_like(h)
@@ -400,7 +422,15 @@ class PronyHistory(History):
     def extrapolate(self, u_prev: np.ndarray | None) -> None:
         """M_n = P_n + (k/2) g(0) H(u*, zeta), u* = 2 u - u_prev with u the field's values (u_{n-1}); u_prev None:
         u* = u (``extrapolated`` only). u itself is not changed."""
-        self.set_current(self.H(self._h) if u_prev is None else self.H.extrapolated(u_prev, self._h))
+        if not getattr(self.H, "fused", False):
+            self.set_current(self.H(self._h) if u_prev is None else self.H.extrapolated(u_prev, self._h))
+            return
+        M, w = self.M.x.array, 0.5 * self.k * self.g0
+        np.copyto(M, self.P)
+        if u_prev is None:
+            self.H(M, scale=w, add=True)
+        else:
+            self.H.extrapolated(u_prev, M, scale=w, add=True)
 
     def state(self) -> dict[str, np.ndarray]:
         out = {"M": self.M.x.array}
