@@ -33,6 +33,16 @@ from .config import MemoryConfig
 _BASIX_CELL = {"triangle": basix.CellType.triangle, "tetrahedron": basix.CellType.tetrahedron}
 
 
+def all_finite(a: np.ndarray, total: float | None = None) -> bool:
+    """Whether every entry is finite: their sum (``total``, if already taken) is finite only if they all are (one
+    pass, no temporary); a sum that is not (an entry that is not, or an overflow of finite ones) is settled entry by
+    entry."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(a) if total is None else total):
+            return True
+    return bool(np.all(np.isfinite(a)))
+
+
 def _equal(a: np.ndarray, b: np.ndarray) -> bool:
     """a == b entry by entry (exact); a sample of about 64 entries first settles most unequal pairs at once."""
     stride = max(1, a.size // 64)
@@ -349,6 +359,10 @@ class History:
         """The current level's term at u* = 2 u - u_prev (``extrapolated`` histories only)."""
         raise NotImplementedError
 
+    def finite(self) -> bool:
+        """Whether M holds no NaN or inf (the stepper's check after each level)."""
+        return all_finite(self.M.x.array)
+
     def state(self) -> dict[str, np.ndarray]:
         """Arrays that define the history, M included (checkpoints write and restore them in place)."""
         raise NotImplementedError
@@ -377,6 +391,7 @@ class PronyHistory(History):
             if hasattr(source, "keep"):
                 source.keep = max(source.keep, 2)
         self._h = np.empty_like(self.M.x.array)  # H of a level, then its increment (no temporaries per step)
+        self._sum: float | None = None  # the sum of M, taken where M was last written (still in cache)
         # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
         self.current_weight: fem.Constant | None = None
         self.g0 = float(np.sum(weights))
@@ -402,6 +417,7 @@ class PronyHistory(History):
                 m += np.multiply(h, self.k * self.weights[0], out=h)
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
+            self._written()
             return
         h = self.H(self._h)
         if half != 1.0:
@@ -413,11 +429,13 @@ class PronyHistory(History):
             term += np.multiply(h, self.k * c, out=step)
             term *= e
             total += term
+        self._written()
 
     def set_current(self, h: np.ndarray) -> None:
         """M_n = P_n + (k/2) g(0) h, with h = H at the extrapolated level n (``extrapolated`` only)."""
         np.multiply(h, 0.5 * self.k * self.g0, out=self.M.x.array)
         self.M.x.array[:] += self.P
+        self._written()
 
     def extrapolate(self, u_prev: np.ndarray | None) -> None:
         """M_n = P_n + (k/2) g(0) H(u*, zeta), u* = 2 u - u_prev with u the field's values (u_{n-1}); u_prev None:
@@ -431,8 +449,20 @@ class PronyHistory(History):
             self.H(M, scale=w, add=True)
         else:
             self.H.extrapolated(u_prev, M, scale=w, add=True)
+        self._written()
+
+    def _written(self) -> None:
+        """M was just written: take its sum now, while it is in cache (``finite`` reads it)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._sum = float(np.add.reduce(self.M.x.array))
+
+    def finite(self) -> bool:
+        """Whether M holds no NaN or inf, from the sum taken when this history last wrote M. After :meth:`state`
+        (a checkpoint may write M through it) M is summed again, until the next commit."""
+        return all_finite(self.M.x.array, self._sum)
 
     def state(self) -> dict[str, np.ndarray]:
+        self._sum = None  # the caller may write the arrays
         out = {"M": self.M.x.array}
         if self.P is not None:
             out["P"] = self.P

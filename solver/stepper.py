@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -39,6 +38,7 @@ from .memory import (
     OutOfPlaneSource,
     PlaneStrainHistory,
     QuadratureRule,
+    all_finite,
     make_history,
     trapezoid_term,
 )
@@ -167,23 +167,15 @@ class Stepper:
     def _check_finite(self) -> None:
         model = self.model
         bad = []
-        with np.errstate(over="ignore", invalid="ignore"):  # an overflowing sum is settled entry by entry
-            if not _all_finite(model.u.x.array):
-                bad.append("displacement")
-            if model.damage is not None and not _all_finite(model.damage.zeta.x.array):
-                bad.append("damage")
-            if model.history is not None and not _all_finite(model.history.M.x.array):
-                bad.append("memory")
+        if not all_finite(model.u.x.array):
+            bad.append("displacement")
+        if model.damage is not None and not all_finite(model.damage.zeta.x.array):
+            bad.append("damage")
+        if model.history is not None and not model.history.finite():
+            bad.append("memory")
         bad = model.comm.allreduce(bad, op=MPI.SUM)
         if bad:
             raise NonFiniteError(bad)
-
-
-def _all_finite(a: np.ndarray) -> bool:
-    """Whether every entry is finite: their sum is finite only if they all are (one pass, no temporary); a sum that
-    is not (an entry that is not, or an overflow of finite ones) is settled entry by entry. (The caller may silence
-    numpy's overflow warning of the sum.)"""
-    return bool(np.isfinite(np.add.reduce(a))) or bool(np.all(np.isfinite(a)))
 
 
 def writes_level(n: int, steps: int, every: int) -> bool:

@@ -312,3 +312,30 @@ def test_equal_is_exact():
     b[7] += 1e-13  # off the sample
     assert not _equal(a, b)
     assert not _equal(a, a[:-1]) and _equal(a[:0], b[:0])
+
+
+@pytest.mark.parametrize("values,finite", [([1.0, -2.0, 3.0], True), ([], True), ([1e308, 1e308], True),
+                                           ([1.0, np.nan], False), ([np.inf, 1.0], False), ([-np.inf, np.inf], False),
+                                           ([1e308, 1e308, np.nan], False)])
+def test_all_finite_decides_like_isfinite(values, finite):
+    """The one-sum NaN/inf test: an overflow of finite entries is not mistaken for an infinite one."""
+    from solver.memory import all_finite
+
+    a = np.array(values, dtype=float)
+    assert all_finite(a) is finite
+    assert finite == bool(np.all(np.isfinite(a)))
+
+
+def test_history_finite_sees_what_was_written_through_state(comm):
+    """PronyHistory.finite() uses the sum taken at the commit; a NaN written through state() (a checkpoint) is seen."""
+    cfg, _ = KERNELS["constant"]
+    m, u, zeta, rule = _setup(comm)
+    hist = make_history(cfg, rule, MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), cfg.L), 0.1, 3)
+    _drive(u, zeta, 1)
+    hist.commit(0)
+    assert hist.finite()
+    hist.state()["M"][0] = np.nan
+    assert not hist.finite()
+    hist.M.x.array[0] = 0.0
+    hist.commit(1)
+    assert hist.finite()
