@@ -208,26 +208,27 @@ class MemorySource:
             del self._cache[self.keep:]
         return eps
 
-    fused = True  # takes scale and add: a history adds scale * H in one pass over the compact components
+    fused = True  # takes scale and base: a history forms base + scale * H in one pass over the compact components
 
-    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, add: bool = False) -> np.ndarray:
-        """scale * H at the points for the current u and zeta, in the quadrature space's layout; with ``add``
-        added to ``out``."""
-        return self._source(self.strain(), out, scale, add)
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """out = base + scale * H at the points for the current u and zeta (base None: scale * H), in the
+        quadrature space's layout (base may be out)."""
+        return self._source(self.strain(), out, scale, base)
 
     def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
-                     add: bool = False) -> np.ndarray:
+                     base: np.ndarray | None = None) -> np.ndarray:
         """H at u* = 2 u - u_prev and the current zeta (as :meth:`__call__`): eps(u*) = 2 eps(u) - eps(u_prev),
         exactly (to round-off), from the kept strains (or a product where one is missing)."""
         eps = np.multiply(self.strain(), 2.0, out=self._work[0])
         eps -= self.strain(u_prev)
-        return self._source(eps, out, scale, add)
+        return self._source(eps, out, scale, base)
 
     def zeta_at_points(self) -> np.ndarray | float:
         return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
 
-    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0, add: bool = False) -> np.ndarray:
-        """scale zeta Phi_L(A eps) from the compact strain, written out (or added) as the full d*d tensor."""
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
         d = self.d
         a = np.multiply(eps, 2.0 * self.lame_mu, out=self._work[1])  # A eps = 2 mu eps + lambda tr(eps) I
         tr = np.add(eps[0], eps[1], out=self._trace)
@@ -240,14 +241,15 @@ class MemorySource:
         z = self.zeta_at_points()
         a *= z * scale if scale != 1.0 else z
         if out is None:
-            out, add = np.empty(self.size_q * d * d), False
+            out = np.empty(self.size_q * d * d)
         full = out.reshape(-1, d * d)
+        start = base.reshape(-1, d * d) if base is not None else None
         for c, (i, j) in enumerate(self.pairs):
             for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
-                if add:
-                    full[:, col] += a[c]
-                else:
+                if start is None:
                     full[:, col] = a[c]
+                else:
+                    np.add(start[:, col], a[c], out=full[:, col])
         return out
 
 
@@ -317,31 +319,31 @@ class OutOfPlaneSource:
 
     fused = True
 
-    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, add: bool = False) -> np.ndarray:
-        """scale * H_33 (as :meth:`MemorySource.__call__`)."""
-        return self._source(self.source.strain(), out, scale, add)
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale * H_33 (as :meth:`MemorySource.__call__`)."""
+        return self._source(self.source.strain(), out, scale, base)
 
     def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
-                     add: bool = False) -> np.ndarray:
+                     base: np.ndarray | None = None) -> np.ndarray:
         """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
         src = self.source
         eps = 2.0 * src.strain()[:2]
         eps -= src.strain(u_prev)[:2]
-        return self._source(eps, out, scale, add)
+        return self._source(eps, out, scale, base)
 
-    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0, add: bool = False) -> np.ndarray:
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
         src = self.source
         h = eps[0] + eps[1]
         h *= src.lame_lambda
         np.clip(h, -src.L, src.L, out=h)
         z = src.zeta_at_points()
         h *= z * scale if scale != 1.0 else z
+        if base is not None:
+            h += base
         if out is None:
             return h
-        if add:
-            out += h
-        else:
-            out[:] = h
+        out[:] = h
         return out
 
 
@@ -409,7 +411,7 @@ class PronyHistory(History):
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
             if getattr(self.H, "fused", False):  # m += k c H, added by the source in one pass
-                self.H(m, scale=half * self.k * self.weights[0], add=True)
+                self.H(m, scale=half * self.k * self.weights[0], base=m)
             else:
                 h = self.H(self._h)
                 if half != 1.0:
@@ -444,11 +446,10 @@ class PronyHistory(History):
             self.set_current(self.H(self._h) if u_prev is None else self.H.extrapolated(u_prev, self._h))
             return
         M, w = self.M.x.array, 0.5 * self.k * self.g0
-        np.copyto(M, self.P)
         if u_prev is None:
-            self.H(M, scale=w, add=True)
+            self.H(M, scale=w, base=self.P)
         else:
-            self.H.extrapolated(u_prev, M, scale=w, add=True)
+            self.H.extrapolated(u_prev, M, scale=w, base=self.P)
         self._written()
 
     def _written(self) -> None:
