@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -39,6 +38,7 @@ from .memory import (
     OutOfPlaneSource,
     PlaneStrainHistory,
     QuadratureRule,
+    all_finite,
     make_history,
     trapezoid_term,
 )
@@ -132,7 +132,7 @@ class Stepper:
                     dinfo = model.damage.correct_first_step()
                     clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
                 if model.u_prev is not None:
-                    model.history.set_current(model.history.H())
+                    model.history.extrapolate(None)  # H(u_1, zeta_1), both predicted
                 again = model.mech.solve(t)
                 again.iterations += info.iterations
                 again.linear_solves += info.linear_solves
@@ -157,25 +157,21 @@ class Stepper:
         return row
 
     def _extrapolated_memory(self, n: int) -> None:
-        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); u keeps u_{n-1}."""
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); then u_prev = u_{n-1}.
+
+        H(u*) comes from the strains of u_{n-1} (just committed) and u_{n-2} by linearity: no third product."""
         model = self.model
-        u, u_prev = model.u.x.array, model.u_prev.x.array
-        last = u.copy()
-        if n >= 2:
-            u *= 2.0
-            u -= u_prev
-        model.history.set_current(model.history.H())
-        u[:] = last
-        u_prev[:] = last
+        model.history.extrapolate(model.u_prev.x.array if n >= 2 else None)
+        model.u_prev.x.array[:] = model.u.x.array
 
     def _check_finite(self) -> None:
         model = self.model
         bad = []
-        if not np.all(np.isfinite(model.u.x.array)):
+        if not all_finite(model.u.x.array):
             bad.append("displacement")
-        if model.damage is not None and not np.all(np.isfinite(model.damage.zeta.x.array)):
+        if model.damage is not None and not all_finite(model.damage.zeta.x.array):
             bad.append("damage")
-        if model.history is not None and not np.all(np.isfinite(model.history.M.x.array)):
+        if model.history is not None and not model.history.finite():
             bad.append("memory")
         bad = model.comm.allreduce(bad, op=MPI.SUM)
         if bad:
