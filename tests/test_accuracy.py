@@ -94,3 +94,25 @@ def test_a_tolerance_run_records_what_it_chose(tmp_path, nproc):
     space, tim = np.array([r["est_space"] for r in rows]), np.array([r["est_time"] for r in rows])
     assert np.all(space + tim <= 1e-2) and np.all(space > 0)
     assert "estimated error" in res.stderr and "for tolerance 1.000e-02" in res.stderr
+
+
+@pytest.mark.serial
+def test_a_tolerance_run_restarts_on_the_same_mesh(tmp_path):
+    """--restart plans again (the plan is deterministic), so the checkpoint fits the mesh and the last level
+    is reproduced."""
+    from solver.io import TIMING_COLUMNS
+    from solver.post import read_csv
+
+    out = tmp_path / "o"
+    args = ["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--set",
+            "output.checkpoint_every=1", "--output", str(out), "--no-progress"]
+    assert cli(args).returncode == 0
+    first = read_csv(out / "timeseries.csv")
+    res = cli([*args, "--restart"])
+    assert res.returncode == 0, res.stderr
+    again = read_csv(out / "timeseries.csv")
+    assert len(again) == len(first)
+    skip = {*TIMING_COLUMNS, "factorizations"}
+    for key in first[-1]:
+        if key not in skip:
+            assert again[-1][key] == pytest.approx(first[-1][key], rel=1e-12, abs=1e-15), key
