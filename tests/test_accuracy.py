@@ -116,3 +116,9 @@ def test_a_tolerance_run_restarts_on_the_same_mesh(tmp_path):
     for key in first[-1]:
         if key not in skip:
             assert again[-1][key] == pytest.approx(first[-1][key], rel=1e-12, abs=1e-15), key
+
+
+def test_a_tolerance_on_a_3d_scene_is_refused():
+    with pytest.raises(ConfigError) as err:
+        load(ROOT / "configs/example1_3d.toml", ["accuracy.tolerance=1e-2"])
+    assert err.value.key == "accuracy.tolerance" and "2-D" in err.value.allowed
