@@ -156,23 +156,32 @@ class _Level0:
 
 class _Worst:
     """A coarse-step run on a mesh (to the scene's T as overridden): eta and eta_K^2 at its level of largest eta
-    (scenes whose load starts at zero have nothing to adapt to at t = 0)."""
+    (scenes whose load starts at zero have nothing to adapt to at t = 0). A step Newton cannot take on a finer
+    mesh is halved (up to 3 times)."""
 
     def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
         from .estimator import estimator_for
         from .stepper import build_model, run
 
-        self.model = model = build_model(_load(path, overrides), comm, geo)
-        est = estimator_for(model)
-        worst: list = [-1.0, None]
+        cfg = _load(path, overrides)
+        for halving in range(4):
+            k = cfg.time.k / 2**halving
+            self.model = model = build_model(_load(path, [*overrides, f"time.k={k!r}"]), comm, geo)
+            est = estimator_for(model)
+            worst: list = [-1.0, None]
 
-        def keep(row):
-            eta2 = est.cells()
-            eta = est.total(eta2)
-            if eta > worst[0]:
-                worst[:] = [eta, eta2]
+            def keep(row, est=est, worst=worst):
+                eta2 = est.cells()
+                eta = est.total(eta2)
+                if eta > worst[0]:
+                    worst[:] = [eta, eta2]
 
-        run(model, None, on_step=keep)
+            try:
+                run(model, None, on_step=keep)
+                break
+            except SolveFailure:
+                if halving == 3:
+                    raise
         self.eta, self.eta2 = worst
         imap = model.u.function_space.dofmap.index_map
         self.dofs = imap.size_global * model.u.function_space.dofmap.index_map_bs
