@@ -359,19 +359,16 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
 
     # 1. on the start mesh, with the highest degree: the step (step doubling) and how eta evolves over the run
     pilot = [*base, f"discretization.u_degree={max(acc.degrees)}"]
-    pilots = []
-    for j in range(3):
-        kj = k0 / 2**j
-        for _ in range(6):  # a start step the scheme cannot take is halved
-            try:
-                pilots.append(_Pilot(path, [*pilot, f"time.k={kj!r}"], comm, geo0, estimate=(j == 0)))
-                break
-            except SolveFailure:
-                k0 /= 2
-                kj = k0 / 2**j
-                pilots.clear()
-        else:
-            raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+    pilots: list[_Pilot] = []
+    for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
+        try:
+            pilots = [_Pilot(path, [*pilot, f"time.k={k0 / 2**j!r}"], comm, geo0, estimate=(j == 0))
+                      for j in range(3)]
+            break
+        except SolveFailure:
+            k0 /= 2
+    else:
+        raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
     p, e_k4, ts, profile = _time_estimate(pilots, order, comm)
     eta = np.array(pilots[0].eta)
     worst = int(np.argmax(eta))
