@@ -199,7 +199,8 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
     if old.exists():
         earlier = json.loads(old.read_text())
         if earlier.get("tolerances") == list(tols) and earlier.get("ref_tol") == ref_tol:
-            result["scenes"] = {k: v for k, v in earlier["scenes"].items() if k in scenes}
+            result["scenes"] = {k: v for k, v in earlier["scenes"].items()
+                                if k in scenes and "failure" not in v["reference"]}
     for name in scenes:
         if name in result["scenes"]:
             log(f"{name}: kept from {old}")
