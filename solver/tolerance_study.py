@@ -181,9 +181,11 @@ def tolerance_run(ref: Reference, path: Path, overrides: list[str], tol: float, 
     # the sensor (the run's own estimate) is evaluated after the measurement, outside the timed loop
     rec = ref.measure(model, extra_seconds=planning)
     sensor_rows.append(sensor({"t": cfg.time.T}))
-    del model, sensor, p.geo
+    cells = p.geo.num_cells()
+    del model, sensor
+    p.geo = None
     gc.collect()
-    rec.update({"tolerance": tol, "degree": p.degree, "order": p.order, "k": p.k, "cells": p.geo.num_cells(),
+    rec.update({"tolerance": tol, "degree": p.degree, "order": p.order, "k": p.k, "cells": cells,
                 "planning_seconds": planning, "estimate": sum(p.estimate.values()), "estimate_parts": p.estimate,
                 "estimate_final_level": sensor_rows[-1]["est_space"] + sensor_rows[-1]["est_time"]})
     log(f"  TOL {tol:g}: P{p.degree} order {p.order} k={p.k:g} {rec['cells']} cells: error {rec['error']:.3e} "
