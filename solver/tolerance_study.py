@@ -51,16 +51,25 @@ class Reference:
         t0 = time.perf_counter()
         p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
                         f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
-        self.k = p.k / refine_k
-        cfg = load(path, [*overrides, *QUIET, *p.overrides, f"time.k={self.k!r}"])
-        self.model = model = build_model(cfg, MPI.COMM_SELF, p.geo)
-        self.u, self.zeta = [], []
+        from .errors import SolveFailure
 
-        def keep(row):
-            self.u.append(model.u.x.array.copy())
-            self.zeta.append(model.damage.zeta.x.array.copy() if model.damage is not None else None)
+        for halving in range(3):  # a step Newton cannot take on the fine mesh is halved
+            self.k = p.k / refine_k / 2**halving
+            cfg = load(path, [*overrides, *QUIET, *p.overrides, f"time.k={self.k!r}"])
+            self.model = model = build_model(cfg, MPI.COMM_SELF, p.geo)
+            self.u, self.zeta = [], []
 
-        run(model, None, on_step=keep)
+            def keep(row, model=model):
+                self.u.append(model.u.x.array.copy())
+                self.zeta.append(model.damage.zeta.x.array.copy() if model.damage is not None else None)
+
+            try:
+                run(model, None, on_step=keep)
+                break
+            except SolveFailure:
+                if halving == 2:
+                    raise
+                log(f"  reference: Newton failed at k = {self.k:g}; halving the step")
         self.plan = p
         self.seconds = time.perf_counter() - t0
         self.dofs = model.u.x.array.size
