@@ -293,16 +293,24 @@ def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, 
 
 def _zeta_difference(path, overrides, comm, coarse_geo, fine_geo) -> float:
     """max over levels of ||zeta_coarse - zeta_fine|| for runs at the same step on two nested meshes (the time
-    error cancels); 0 without damage."""
+    error cancels); 0 without damage. If Newton fails, both runs are repeated with half the step."""
     import ufl
     from dolfinx import fem
 
     from .reference import interpolation_matrix
 
-    coarse = _Pilot(path, overrides, comm, coarse_geo)
-    if not coarse.zeta:
-        return 0.0
-    fine = _Pilot(path, overrides, comm, fine_geo)
+    k = _load(path, overrides).time.k
+    for halving in range(4):  # a step Newton cannot take on these meshes is halved, for both runs
+        over = [*overrides, f"time.k={k / 2**halving!r}"]
+        try:
+            coarse = _Pilot(path, over, comm, coarse_geo)
+            if not coarse.zeta:
+                return 0.0
+            fine = _Pilot(path, over, comm, fine_geo)
+            break
+        except SolveFailure:
+            if halving == 3:
+                raise
     Zf = fine.model.damage.V
     owned = Zf.dofmap.index_map.size_local
     P = interpolation_matrix(coarse.model.damage.V, Zf.tabulate_dof_coordinates()[:owned, :2])
