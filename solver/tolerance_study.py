@@ -311,7 +311,8 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     tight = sum(r["error"] >= 0.2 * r["tolerance"] for r in rows)
     within = sum(r["cost_ratio"] is not None and r["cost_ratio"] <= 2 for r in rows)
     if unreached:
-        lines += ["", f"Refused as out of reach within {MAX_DOFS} displacement dofs (a one-line error for a user):", ""]
+        lines += ["", f"Not measured: a reference or a plan that failed (a Newton failure is a failed solve, exit 1, "
+                  f"for a user), or a tolerance out of reach within {MAX_DOFS} displacement dofs (exit 2):", ""]
         lines += [f"- {name}" + (f", TOL {tol:g}" if tol is not None else "") + f": {why}" for name, tol, why in unreached]
     lines += ["", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. "
               f"Cost within 2x of the cheapest uniform choice: {within} of {n}.", ""]
