@@ -16,6 +16,30 @@ from petsc4py import PETSc
 
 from .errors import ConfigError
 
+# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on
+# (see choose_linear; the figure is measured, README "3-D and iterative solvers")
+AUTO_ITERATIVE_DOFS_3D = 40_000
+
+
+def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton") -> str:
+    """The linear solver ``solver.linear = kind`` stands for on a mesh of dimension ``dim`` with ``dofs``
+    displacement dofs (global): ``kind`` itself unless it is ``auto``.
+
+    ``auto`` in 2-D: the sequential Cholesky on one process, solved redundantly on up to 4 ranks, MUMPS beyond
+    (:func:`direct_options`). In 3-D a sparse factorization fills much more: MUMPS below
+    ``AUTO_ITERATIVE_DOFS_3D`` dofs, the iterative solver from there on (Newton only: the fixed-point
+    methods re-solve one factored matrix many times).
+    """
+    if kind != "auto":
+        return kind
+    if dim == 3:
+        return "iterative" if method == "newton" and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
+    return _auto_direct(comm)
+
+
+def _auto_direct(comm: MPI.Comm) -> str:
+    return "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
+
 
 def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
     """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
@@ -28,7 +52,7 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
     one, so on a few ranks it is faster to solve redundantly and share the rest of the work.
     """
     if kind == "auto":
-        kind = "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
+        kind = _auto_direct(comm)
     if kind == "petsc" and comm.size > 1:
         kind = "redundant"
     factor = "cholesky" if symmetric else "lu"
