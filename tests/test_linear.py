@@ -66,10 +66,13 @@ def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
 
 
 def test_iterative_options_tie_the_krylov_tolerance_to_newton():
-    from solver.linear import iterative_options, linear_options
+    from solver.linear import default_amg, iterative_options, linear_options
 
     opts = iterative_options(1e-10, elasticity=True)
-    assert opts["ksp_type"] == "cg" and opts["pc_type"] == "gamg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
+    assert opts["ksp_type"] == "cg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
+    assert opts["pc_type"] == default_amg() == ("ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg")
+    assert opts["ksp_guess_type"] == "fischer" and "ksp_guess_type" not in iterative_options(1e-10, True, False)
+    assert iterative_options(1e-10, True, amg="gamg")["pc_gamg_agg_nsmooths"] == "0"  # plain aggregation
     assert opts["ksp_norm_type"] == "unpreconditioned" and float(opts["ksp_atol"]) == 0.0
     assert iterative_options(1e-8, elasticity=False, symmetric=False)["ksp_type"] == "gmres"
     assert linear_options(MPI.COMM_WORLD, "iterative", True, 1e-8, elasticity=False)["pc_type"] == "jacobi"
