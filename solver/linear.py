@@ -16,9 +16,10 @@ from petsc4py import PETSc
 
 from .errors import ConfigError
 
-# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on
-# (see choose_linear; the figure is measured, README "3-D and iterative solvers")
-AUTO_ITERATIVE_DOFS_3D = 40_000
+# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on.
+# Measured on 3-D Example 1, one rank (benchmarks/results/auto_3d/scaling.md): a 50-step run (the example's)
+# takes 1.2 s with MUMPS and 1.3 s iteratively at 6,591 dofs, 3.7 s and 2.6 s at 10,125, 57 s and 23 s at 59,049
+AUTO_ITERATIVE_DOFS_3D = 10_000
 
 
 def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton") -> str:

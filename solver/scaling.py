@@ -256,8 +256,32 @@ def table(scaling: dict) -> str:
             lines.append(f"| {c['n']} | {c['dofs']:,} | {c['solver']} | {1e3 * c['step_s']:,.1f} "
                          f"| {1e3 * two['step_s']:,.1f} | {c['step_s'] / two['step_s']:.2f} "
                          f"| {c['level0_s'] / two['level0_s']:.2f} |")
-    lines += ["", *cost_model(scaling)]
+    lines += ["", *break_even(cases), "", *cost_model(scaling)]
     return "\n".join(lines) + "\n"
+
+
+RUN_STEPS = 50  # the length of 3-D Example 1 (T = 1, k = 0.02): the run the direct/iterative comparison prices
+
+
+def break_even(cases: dict) -> list[str]:
+    """Direct against iterative at the same size and ranks: a run of RUN_STEPS steps, and the number of steps
+    from which the direct solver's cheaper steps repay its factorization (set-up + level 0 + steps x step)."""
+    out = [f"## Direct against iterative: a run of {RUN_STEPS} steps, and the steps from which the direct one is faster",
+           "", "| n | dofs | ranks | direct | direct (s) | iterative (s) | direct faster from (steps) |",
+           "|---|---|---|---|---|---|---|"]
+    for it in sorted((c for c in cases.values() if c["solver"] == "iterative" and c.get("status") == "ok"),
+                     key=lambda c: (c["nproc"], c["n"])):
+        for solver in ("mumps", "petsc"):
+            d = cases.get(key(solver, it["nproc"], it["n"]))
+            if not d or d.get("status") != "ok":
+                continue
+            fixed_d, fixed_i = d["setup_s"] + d["level0_s"], it["setup_s"] + it["level0_s"]
+            gain = it["step_s"] - d["step_s"]
+            steps = (fixed_d - fixed_i) / gain if gain > 0 else None
+            when = "never" if steps is None else "always" if steps <= 0 else f"{steps:,.0f}"
+            out.append(f"| {it['n']} | {it['dofs']:,} | {it['nproc']} | {solver} | {fixed_d + RUN_STEPS * d['step_s']:,.1f} "
+                       f"| {fixed_i + RUN_STEPS * it['step_s']:,.1f} | {when} |")
+    return out
 
 
 def cost_model(scaling: dict) -> list[str]:
@@ -397,6 +421,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--redo", action="store_true", help="run again the cases already in bench.json")
     p.add_argument("--output", default=str(RESULTS))
     p.add_argument("--no-readme", action="store_true", help="do not rewrite the README's generated block")
+    p.add_argument("--report-only", action="store_true", help="run nothing: rewrite the fits and reports from bench.json")
     a = p.parse_args(argv)
     for n in a.sizes:
         if n < 1:
@@ -411,7 +436,9 @@ def main(argv: list[str] | None = None) -> int:
     cases = scaling["cases"]
     readme = None if a.no_readme or out.resolve() != RESULTS.resolve() else ROOT / "README.md"
     timeout = a.timeout_s or max(3 * a.budget_s, 300.0)
-    for solver in a.solvers:
+    if a.report_only:
+        scaling.update({k: old[k] for k in ("machine", "cores", "date") if k in old})  # when it was measured
+    for solver in [] if a.report_only else a.solvers:
         for nproc in a.nproc:
             for n in sorted(a.sizes):
                 k = key(solver, nproc, n)

@@ -85,7 +85,11 @@ def test_table_lists_skipped_cases_with_their_reason_and_the_speedups():
              for R in (1, 2)}
     cases["mumps/np1/n68"] = {"n": 68, "solver": "mumps", "nproc": 1, "steps": 3, "dofs": scaling.dofs_of(68),
                               "status": "skipped", "reason": "predicted 9999 s > budget 600 s (from n = 32)"}
+    cases["mumps/np1/n20"] = _case("mumps", 1, 20, step_s=0.05, level0_s=20.0, split_ms=dict.fromkeys(scaling.PHASES, 1.0),
+                                   newton_per_step=1.0, krylov_per_solve=None, setups_total=2, contact_force=12.0)
     text = scaling.table({"cases": cases, "fit": scaling.fits(cases)})
+    # 50 steps: 1 + 20 + 50 x 0.05 against 1 + 4 + 50 x 0.2; the direct run is faster from (21 - 5) / 0.15 steps
+    assert "| 20 | 27,783 | 1 | mumps | 23.5 | 15.0 | 107 |" in text
     assert "| 68 | 985,527 | mumps | 1 | 3 |" in text and "skipped: predicted 9999 s > budget 600 s" in text
     assert "| 20 | 27,783 | iterative | 200.0 | 100.0 | 2.00 | 2.00 |" in text
     rows = [ln for ln in text.splitlines() if ln.startswith("| 20 | 27,783 | iterative | ")]
