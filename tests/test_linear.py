@@ -230,3 +230,14 @@ def test_multigrid_level_options_reach_the_preconditioner(comm):
     smoother = pc.getMGSmoother(pc.getMGLevels() - 1)
     assert smoother.getType() == "chebyshev" and smoother.getTolerances()[3] == 3  # default type, scene's max_it
     assert not PETSc.Options().hasName("mech_mg_levels_ksp_max_it")  # and they are gone after the solve
+
+
+def test_mumps_reads_its_workspace_option_in_both_solvers(comm):
+    """MUMPS reads mat_mumps_* when it factors (after the options were written and cleared): the damage KSP
+    is factored while they are set, the displacement SNES's around each solve."""
+    from solver.stepper import Stepper, build_model
+
+    model = build_model(_small_3d("mumps"), comm)
+    Stepper(model).step(0)
+    for ksp in (model.damage.ksp, model.mech.solver.snes.getKSP()):
+        assert ksp.getPC().getFactorMatrix().getMumpsIcntl(14) == 50
