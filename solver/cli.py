@@ -47,6 +47,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--output", "-o", help="results directory (default: the scene's output.directory)")
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a scene value, e.g. --set mesh.nx=64 --set time.k=0.002 (repeatable)")
+    r.add_argument("--tolerance", metavar="TOL",
+                   help="bound on the paper's error norm (accuracy.tolerance): the solver chooses mesh, degree and step")
     mode = r.add_mutually_exclusive_group()
     mode.add_argument("--overwrite", action="store_true", help="replace earlier results in the output directory")
     mode.add_argument("--restart", action="store_true",
@@ -71,7 +73,8 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5")
+RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
+                "mesh.h5")
 
 
 def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool) -> None:
@@ -153,30 +156,87 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     return 0
 
 
+def _tolerance_overrides(args) -> list[str]:
+    """``--set`` overrides with ``--tolerance`` as accuracy.tolerance (checked like the scene key)."""
+    if args.tolerance is None:
+        return list(args.overrides)
+    from .config.accuracy import tolerance
+    from .config.fields import Ctx
+
+    try:
+        value = float(args.tolerance)
+    except ValueError:
+        raise UsageError(f"--tolerance {args.tolerance}: must be a number strictly between 0 and 1") from None
+    return [*args.overrides, f"accuracy.tolerance={tolerance(Ctx('--tolerance'), 'tolerance', value)!r}"]
+
+
 def cmd_run(args, comm: MPI.Comm) -> int:
     import time
 
-    cfg = load(args.config, args.overrides)
+    overrides = _tolerance_overrides(args)
+    cfg = load(args.config, overrides)
     outdir = Path(args.output or cfg.output.directory)
     # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
     from .stepper import build_model, run
 
-    model = build_model(cfg, comm)
-    _prepare_output(comm, outdir, args.overwrite, args.restart)
+    plan, sensors = None, ()
+    start = time.perf_counter()
+    if cfg.accuracy.enabled:
+        from .accuracy import ErrorSensor, contradicting
+        from .accuracy import plan as make_plan
+
+        clash = contradicting(args.overrides)
+        if clash:
+            raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "
+                             "the mesh size, the step, the degree and the order); drop one of them")
+        _prepare_output(comm, outdir, args.overwrite, args.restart)
+        log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
+        plan = make_plan(Path(args.config), overrides, comm, log=log.info)
+        cfg = load(args.config, [*overrides, *plan.overrides])
+        model = build_model(cfg, comm, plan.geo)
+        sensors = (ErrorSensor(model, plan),)
+        _write_plan(comm, outdir, plan, model)
+    else:
+        model = build_model(cfg, comm)
+        _prepare_output(comm, outdir, args.overwrite, args.restart)
     log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
              comm.size)
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
-    start = time.perf_counter()
     try:
-        rows = run(model, outdir, on_step=update, restart=args.restart)
+        rows = run(model, outdir, on_step=update, restart=args.restart, sensors=sensors)
     finally:
         if bar is not None:
             bar.close()
     last = rows[-1]
     log.info("done in %.1f s: t = %g, zeta_min = %.6g, contact force = %.6g", time.perf_counter() - start,
              last["t"], last["zeta_min"], last["contact_force"])
+    if plan is not None:
+        worst = sensors[0].worst
+        log.info("estimated error %.3e (space %.3e, time %.3e; max over levels) for tolerance %.3e: P%d, order %d, "
+                 "k = %g, %d cells", worst["total"], worst["space"], worst["time"], plan.tolerance, plan.degree,
+                 plan.order, plan.k, model.geo.num_cells())
+        if worst["total"] > plan.tolerance:
+            log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
+                     "mesh was too small); run again with a smaller tolerance")
     log.info("results in %s (solution.xdmf for ParaView, timeseries.csv, config.toml)", outdir)
     return 0
+
+
+def _write_plan(comm: MPI.Comm, outdir: Path, plan, model) -> None:
+    """plan.json (what the tolerance chose and why) and the chosen mesh with its boundary tags (mesh.xdmf)."""
+    import json
+
+    from dolfinx.io import XDMFFile
+
+    from .io import on_rank0, write_text_atomic
+
+    info = plan.summary()
+    info["parts"] = model.geo.tags
+    on_rank0(comm, lambda: write_text_atomic(outdir / "plan.json", json.dumps(info, indent=1) + "\n"))
+    with XDMFFile(comm, str(outdir / "mesh.xdmf"), "w") as f:
+        f.write_mesh(model.geo.mesh)
+        model.geo.mesh.topology.create_connectivity(model.geo.dim - 1, model.geo.dim)
+        f.write_meshtags(model.geo.facet_tags)
 
 
 def _installed(module: str) -> bool:

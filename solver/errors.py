@@ -4,7 +4,8 @@ Callers decide by type and fields, never by the message text:
 
 - :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
   scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
-  line and the results directory.
+  line and the results directory, :class:`ToleranceError` for a tolerance out of reach
+  (``tolerance``, ``estimate``, ``dofs``, ``limit``).
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
   (filled in by the stepper, :meth:`SolveFailure.at`), and a ``status`` word for studies:
   :class:`DisplacementSolveError` (``method``, ``reason``, ``iterations``, ``residuals``,
@@ -62,6 +63,16 @@ def show(value: Any) -> str:
     if isinstance(value, dict):
         return "{" + ", ".join(value) + "}"
     return str(value)
+
+
+class ToleranceError(InputError):
+    """A tolerance the solver cannot reach within its limits: the best ``estimate`` at ``dofs`` is above
+    ``tolerance``; ``limit`` names the setting that stopped it."""
+
+    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str) -> None:
+        self.tolerance, self.estimate, self.dofs, self.limit = tolerance, estimate, dofs, limit
+        super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit} "
+                         f"(estimate {estimate:.3g} at {dofs} displacement dofs)")
 
 
 # ----------------------------------------------------------------------------- run failures

@@ -13,9 +13,10 @@ and ‖ε(u − u_h)‖ ≤ C η with a constant C that the theory leaves open: 
 
 The estimate is assembled as one vector against the piecewise constants (one test function
 per cell), so that η_K² comes out per cell in one assembly, in parallel as in serial. The
-memory stress M lives at quadrature points and cannot be evaluated on facets, so only its
-cell term enters (it is zero at t = 0, where the estimate is first used, and piecewise
-constant for P1, where it has no divergence either).
+memory stress M lives at quadrature points and has no facet values, so σ_h uses its L2
+projection Π M onto discontinuous tensors of degree p − 1, cell by cell (exact for P1,
+where M is one value per cell; zero at t = 0). Without it the residual of a later level
+measures the memory stress itself, not the discretization error.
 """
 
 from __future__ import annotations
@@ -33,6 +34,34 @@ from .geometry import Geometry
 from .material import elasticity, strain
 
 
+class MemoryProjection:
+    """Π M: the L2 projection of a quadrature-point tensor M onto discontinuous tensors of ``degree``, cell by
+    cell (the mass matrix is block diagonal: one exact block-Jacobi solve)."""
+
+    def __init__(self, M: fem.Function, dx, degree: int) -> None:
+        mesh = M.function_space.mesh
+        S = fem.TensorFunctionSpace(mesh, ("DG", degree))
+        self.PM = fem.Function(S, name="memory_projected")
+        s, t = ufl.TrialFunction(S), ufl.TestFunction(S)
+        A = fpetsc.assemble_matrix(fem.form(ufl.inner(s, t) * ufl.dx))
+        A.assemble()
+        self.L = fem.form(ufl.inner(M, t) * dx)
+        self.b = fpetsc.create_vector(self.L)
+        self.ksp = PETSc.KSP().create(mesh.comm)
+        self.ksp.setOperators(A)
+        self.ksp.setType("cg")
+        self.ksp.getPC().setType("bjacobi")
+        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
+
+    def update(self) -> None:
+        with self.b.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(self.b, self.L)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.ksp.solve(self.b, self.PM.vector)
+        self.PM.x.scatter_forward()
+
+
 class ResidualEstimator:
     """η_K² of the displacement ``u`` on every owned cell (:meth:`cells`) and η (:meth:`total`).
 
@@ -43,7 +72,7 @@ class ResidualEstimator:
 
     def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
                  boundaries: tuple[BoundaryConfig, ...], tractions: dict[str, fem.Constant], degree: int,
-                 body_force: fem.Constant | None = None) -> None:
+                 body_force: fem.Constant | None = None, memory: MemoryProjection | None = None) -> None:
         mesh = geo.mesh
         self.geo = geo
         V0 = fem.FunctionSpace(mesh, ("DG", 0))
@@ -51,6 +80,9 @@ class ResidualEstimator:
         n = ufl.FacetNormal(mesh)
         h = ufl.CellDiameter(mesh)
         sigma = elasticity(strain(u), material.E, material.nu, material.model)
+        self.memory = memory
+        if memory is not None:
+            sigma = sigma + memory.PM
         md = {"quadrature_degree": degree}
         dx, dS = ufl.dx(metadata=md), ufl.dS(metadata=md)
 
@@ -82,6 +114,8 @@ class ResidualEstimator:
 
     def cells(self) -> np.ndarray:
         """η_K² of the owned cells, in the mesh's local cell order."""
+        if self.memory is not None:
+            self.memory.update()
         with self.vec.localForm() as local:
             local.set(0.0)
         fpetsc.assemble_vector(self.vec, self.form)
@@ -101,7 +135,10 @@ def estimator_for(model) -> ResidualEstimator:
     tractions = {part.name: f for part, f in ops.tractions}
     degree = 2 * cfg.discretization.u_degree + 2
     body_force = ops.f0 if ops.body_force is not None else None
-    return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force)
+    memory = None
+    if model.history is not None:
+        memory = MemoryProjection(model.history.M, model.rule.dx, cfg.discretization.u_degree - 1)
+    return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force, memory)
 
 
 def dorfler(eta2: np.ndarray, theta: float, comm: MPI.Comm) -> np.ndarray:

@@ -33,6 +33,22 @@ from .config import MemoryConfig
 _BASIX_CELL = {"triangle": basix.CellType.triangle, "tetrahedron": basix.CellType.tetrahedron}
 
 
+def all_finite(a: np.ndarray, total: float | None = None) -> bool:
+    """Whether every entry is finite: their sum (``total``, if already taken) is finite only if they all are (one
+    pass, no temporary); a sum that is not (an entry that is not, or an overflow of finite ones) is settled entry by
+    entry."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(a) if total is None else total):
+            return True
+    return bool(np.all(np.isfinite(a)))
+
+
+def _equal(a: np.ndarray, b: np.ndarray) -> bool:
+    """a == b entry by entry (exact); a sample of about 64 entries first settles most unequal pairs at once."""
+    stride = max(1, a.size // 64)
+    return a.shape == b.shape and np.array_equal(a[::stride], b[::stride]) and np.array_equal(a, b)
+
+
 class QuadratureRule:
     """One quadrature rule for all quadrature-point data: points, ``dx`` and evaluation.
 
@@ -96,23 +112,35 @@ class QuadratureEvaluator:
 
 
 class MemorySource:
-    """H = zeta Phi_L(A eps(u)) at the rule's points, as a sparse matvec and numpy.
+    """H = zeta Phi_L(A eps(u)) at the rule's points, as one sparse matvec and a few numpy passes.
 
     eps(u) at the points is a fixed linear map of u's dofs: it is tabulated once (an
-    Expression with a trial function) into a sparse matrix, and so is zeta at the points.
-    Each call is then two sparse products and a few vectorized operations, a fraction of
-    the cost of re-running the Expression kernel over all cells. Equal to the UFL
-    expression ``memory_source`` (tested), which remains the definition.
+    Expression with a trial function) into a sparse matrix ``E`` that gives the d(d+1)/2
+    independent components of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one
+    block of rows per component: 24 entries per point for P2 triangles, where the full
+    d*d tensor took 36. zeta at the points is a second, small product. A eps, the
+    truncation (skipped when no value reaches L: it is then the identity) and the factor
+    zeta act on the compact components; only the result is written out in the quadrature
+    space's d*d layout. Equal to the UFL expression ``memory_source`` (tested), which
+    remains the definition, and bit for bit equal to the full-tensor product it replaces.
+
+    The strain is linear in u, so H at an extrapolated u* = 2 u - u_prev follows from the
+    strains of u and u_prev (:meth:`extrapolated`): with ``keep`` > 0 the last ``keep``
+    strains of the field's values are kept, each with a copy of the values it belongs to, and
+    reused when asked for the same values again (an exact comparison: after a restart, or for
+    a u that changed, they are computed again).
     """
 
     def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
-                 L: float) -> None:
+                 L: float, keep: int = 0) -> None:
         import scipy.sparse as sp
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
         self.u, self.zeta, self.L, self.d = u, zeta, L, d
         self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
+        self.keep = keep
+        self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
         cells = rule.cells
         npts = rule.points.shape[0]
         rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
@@ -123,6 +151,7 @@ class MemorySource:
             return vals.reshape(len(cells), npts, -1, space.dofmap.dof_layout.num_dofs)
 
         size_q = self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts
+        self.size_q = size_q
 
         def nodes_of(space) -> np.ndarray:
             return space.dofmap.list.array.reshape(-1, space.dofmap.dof_layout.num_dofs)[: len(cells)]
@@ -135,17 +164,20 @@ class MemorySource:
         nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
         bs = V.dofmap.index_map_bs
         size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+        self.pairs = [(i, i) for i in range(d)] + [(i, j) for i in range(d) for j in range(i + 1, d)]
         rows, cols, vals = [], [], []
-        for i in range(d):
-            for j in range(d):
-                r = (rows_q * d * d + i * d + j)[:, :, None]  # (cell, point, 1)
-                for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
-                    v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
-                    rows.append(np.broadcast_to(r, v.shape).ravel())
-                    cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
-                    vals.append(v.ravel())
-        self.G = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                               shape=(size_q * d * d, size_v)).tocsr()  # duplicates (i == j) are summed
+        for c, (i, j) in enumerate(self.pairs):
+            r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
+            for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
+                v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
+                rows.append(np.broadcast_to(r, v.shape).ravel())
+                cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
+                vals.append(v.ravel())
+        # duplicates (i == j: two halves) are summed exactly; rows sorted by column, as the full tensor's were
+        self.E = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(len(self.pairs) * size_q, size_v)).tocsr()
+        self._work = np.empty((2, len(self.pairs), size_q))  # the extrapolated strain, A eps
+        self._trace = np.empty(size_q)
         self.Zq = None
         if isinstance(zeta, fem.Function):
             Z = zeta.function_space
@@ -155,24 +187,69 @@ class MemorySource:
             nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
             self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
 
-    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        """H at the points, in the quadrature space's layout (in place on one temporary)."""
-        flat = self.G @ self.u.x.array  # eps, (point, i, j) flattened
-        e = flat.reshape(-1, self.d * self.d)
-        diag = list(range(0, self.d * self.d, self.d + 1))
-        tr = e[:, diag].sum(axis=1)
+    def forget(self) -> None:
+        """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
+        self._cache.clear()
+
+    def strain(self, u: np.ndarray | None = None) -> np.ndarray:
+        """The independent components of eps(u) at the points, (component, point); u: the field's values by default.
+
+        Only strains of the field's own values are kept (the last ``keep`` of them, in the order computed);
+        one of another array is found among them or computed. The result may be a kept array: read it,
+        never change it."""
+        own = u is None
+        u = self.u.x.array if own else u
+        for values, eps in self._cache:
+            if _equal(values, u):
+                return eps
+        eps = (self.E @ u).reshape(len(self.pairs), -1)
+        if self.keep and own:
+            self._cache.insert(0, (u.copy(), eps))
+            del self._cache[self.keep:]
+        return eps
+
+    fused = True  # takes scale and base: a history forms base + scale * H in one pass over the compact components
+
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """out = base + scale * H at the points for the current u and zeta (base None: scale * H), in the
+        quadrature space's layout (base may be out)."""
+        return self._source(self.strain(), out, scale, base)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     base: np.ndarray | None = None) -> np.ndarray:
+        """H at u* = 2 u - u_prev and the current zeta (as :meth:`__call__`): eps(u*) = 2 eps(u) - eps(u_prev),
+        exactly (to round-off), from the kept strains (or a product where one is missing)."""
+        eps = np.multiply(self.strain(), 2.0, out=self._work[0])
+        eps -= self.strain(u_prev)
+        return self._source(eps, out, scale, base)
+
+    def zeta_at_points(self) -> np.ndarray | float:
+        return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
+        d = self.d
+        a = np.multiply(eps, 2.0 * self.lame_mu, out=self._work[1])  # A eps = 2 mu eps + lambda tr(eps) I
+        tr = np.add(eps[0], eps[1], out=self._trace)
+        for i in range(2, d):
+            tr += eps[i]
         tr *= self.lame_lambda
-        e *= 2.0 * self.lame_mu
-        for i in diag:
-            e[:, i] += tr
-        np.clip(flat, -self.L, self.L, out=flat)
-        if self.Zq is not None:
-            e *= (self.Zq @ self.zeta.x.array)[:, None]
-        else:
-            flat *= float(self.zeta.value)
+        a[:d] += tr
+        if a.max() > self.L or a.min() < -self.L:  # the truncation acts (NaN: skipped, and kept, like clip's)
+            np.clip(a, -self.L, self.L, out=a)
+        z = self.zeta_at_points()
+        a *= z * scale if scale != 1.0 else z
         if out is None:
-            return flat
-        out[:] = flat
+            out = np.empty(self.size_q * d * d)
+        full = out.reshape(-1, d * d)
+        start = base.reshape(-1, d * d) if base is not None else None
+        for c, (i, j) in enumerate(self.pairs):
+            for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
+                if start is None:
+                    full[:, col] = a[c]
+                else:
+                    np.add(start[:, col], a[c], out=full[:, col])
         return out
 
 
@@ -181,10 +258,13 @@ class MemoryForce:
 
     Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
     P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
-    at n = 64, measured; a third of the step). It is also G^T W: the source's strain operator
-    G (eps at the points from u's dofs, built once) transposed, with W the weight w_q |J_K|
-    of each point of an owned cell (0 on ghost cells, whose owners add their part). So B M
-    is G^T (W M): G has fewer entries (the symmetric halves merged), and the product runs in
+    at n = 64, measured; a third of the step). It is also E^T W m: with w_q |J_K| the weight
+    of each point of an owned cell (0 on ghost cells, whose owners add their part),
+    (M, eps(w)) = sum_q w_q |J_K| (sum_i M_ii eps_ii(w) + sum_{i<j} (M_ij + M_ji) eps_ij(w)), so
+    m holds M's diagonal components and the sums of its off-diagonal pairs (M need not be
+    symmetric), and E is the source's strain operator of the independent components
+    (:class:`MemorySource`), transposed with the weights folded in once: 24 entries per P2
+    point, where the full-tensor operator has 36 and the assembled B 48. The product runs in
     scipy on the local arrays, followed by one reverse scatter. Equal to B M to round-off
     (tested).
     """
@@ -193,7 +273,7 @@ class MemoryForce:
         import scipy.sparse as sp
 
         mesh = rule.mesh
-        d = source.d
+        self.d, self.pairs = source.d, source.pairs
         tdim = mesh.topology.dim
         n_owned = mesh.topology.index_map(tdim).size_local
         npts = rule.points.shape[0]
@@ -203,16 +283,24 @@ class MemoryForce:
         # |J_K| = vol_K / (reference volume), the reference volume being the sum of the weights
         weights = np.outer(vol.array_r[cell_dofs], rule.weights / rule.weights.sum())  # (owned cell, point)
         vol.destroy()
-        size_q = source.Q.dofmap.index_map.size_local + source.Q.dofmap.index_map.num_ghosts
+        size_q = source.size_q
         nodes = source.Q.dofmap.list.array.reshape(-1, npts)[:n_owned]
         w = np.zeros(size_q)
         w[nodes.ravel()] = weights.ravel()
-        self.GW = (source.G.T @ sp.diags(np.repeat(w, d * d))).tocsr()
+        self.EW = (source.E.T @ sp.diags(np.tile(w, len(self.pairs)))).tocsr()
+        self._m = np.empty((len(self.pairs), size_q))
 
     def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
         """out = B M (owned entries; ``out`` a ghosted vector of u's space)."""
+        d, m = self.d, self._m
+        full = M.x.array.reshape(-1, d * d)
+        for c, (i, j) in enumerate(self.pairs):
+            if i == j:
+                m[c] = full[:, i * d + i]
+            else:
+                np.add(full[:, i * d + j], full[:, j * d + i], out=m[c])
         with out.localForm() as local:
-            local.array[:] = self.GW @ M.x.array
+            local.array[:] = self.EW @ m.reshape(-1)
         out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
 
@@ -221,23 +309,38 @@ class OutOfPlaneSource:
 
     In plane strain eps_33 = 0, so (A eps)_33 = lambda (eps_11 + eps_22); Phi_L truncates
     componentwise, so the 33 entry of the truncated tensor is the truncated 33 entry.
-    Uses the strain operator of the in-plane :class:`MemorySource`.
+    Uses the strain of the in-plane :class:`MemorySource`, which keeps its last one for it.
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
         self.source = source
+        source.keep = max(source.keep, 1)  # the in-plane commit's strain, read again here
         self.Q = rule.space(())
 
-    def __call__(self, out: np.ndarray | None = None) -> np.ndarray:
-        src, d = self.source, self.source.d
-        e = (src.G @ src.u.x.array).reshape(-1, d * d)
-        h = e[:, list(range(0, d * d, d + 1))].sum(axis=1)
+    fused = True
+
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale * H_33 (as :meth:`MemorySource.__call__`)."""
+        return self._source(self.source.strain(), out, scale, base)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     base: np.ndarray | None = None) -> np.ndarray:
+        """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
+        src = self.source
+        eps = 2.0 * src.strain()[:2]
+        eps -= src.strain(u_prev)[:2]
+        return self._source(eps, out, scale, base)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
+        src = self.source
+        h = eps[0] + eps[1]
         h *= src.lame_lambda
         np.clip(h, -src.L, src.L, out=h)
-        if src.Zq is not None:
-            h *= src.Zq @ src.zeta.x.array
-        else:
-            h *= float(src.zeta.value)
+        z = src.zeta_at_points()
+        h *= z * scale if scale != 1.0 else z
+        if base is not None:
+            h += base
         if out is None:
             return h
         out[:] = h
@@ -253,6 +356,14 @@ class History:
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
         raise NotImplementedError
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """The current level's term at u* = 2 u - u_prev (``extrapolated`` histories only)."""
+        raise NotImplementedError
+
+    def finite(self) -> bool:
+        """Whether M holds no NaN or inf (the stepper's check after each level)."""
+        return all_finite(self.M.x.array)
 
     def state(self) -> dict[str, np.ndarray]:
         """Arrays that define the history, M included (checkpoints write and restore them in place)."""
@@ -276,6 +387,13 @@ class PronyHistory(History):
         self.trapezoid = trapezoid or extrapolated
         self.extrapolated = extrapolated
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
+        if extrapolated:  # H(u*) from the strains of u_{n-1} and u_{n-2}, kept by the source
+            if not hasattr(source, "extrapolated"):
+                raise TypeError(f"the extrapolated trapezoid needs a source with extrapolated(): {type(source).__name__}")
+            if hasattr(source, "keep"):
+                source.keep = max(source.keep, 2)
+        self._h = np.empty_like(self.M.x.array)  # H of a level, then its increment (no temporaries per step)
+        self._sum: float | None = None  # the sum of M, taken where M was last written (still in cache)
         # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
         self.current_weight: fem.Constant | None = None
         self.g0 = float(np.sum(weights))
@@ -287,30 +405,65 @@ class PronyHistory(History):
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
 
     def commit(self, n: int) -> None:
-        h = self.H()
-        if self.trapezoid and n == 0:
-            h *= 0.5
+        half = 0.5 if self.trapezoid and n == 0 else 1.0
         if self.current_weight is not None:
             self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
-            m += (self.k * self.weights[0]) * h
+            if getattr(self.H, "fused", False):  # m += k c H, added by the source in one pass
+                self.H(m, scale=half * self.k * self.weights[0], base=m)
+            else:
+                h = self.H(self._h)
+                if half != 1.0:
+                    h *= half
+                m += np.multiply(h, self.k * self.weights[0], out=h)
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
+            self._written()
             return
+        h = self.H(self._h)
+        if half != 1.0:
+            h *= half
         total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
+        step = np.empty_like(h)
         for term, c, e in zip(self.terms, self.weights, self.decay):
-            term += (self.k * c) * h
+            term += np.multiply(h, self.k * c, out=step)
             term *= e
             total += term
+        self._written()
 
     def set_current(self, h: np.ndarray) -> None:
         """M_n = P_n + (k/2) g(0) h, with h = H at the extrapolated level n (``extrapolated`` only)."""
         np.multiply(h, 0.5 * self.k * self.g0, out=self.M.x.array)
         self.M.x.array[:] += self.P
+        self._written()
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """M_n = P_n + (k/2) g(0) H(u*, zeta), u* = 2 u - u_prev with u the field's values (u_{n-1}); u_prev None:
+        u* = u (``extrapolated`` only). u itself is not changed."""
+        if not getattr(self.H, "fused", False):
+            self.set_current(self.H(self._h) if u_prev is None else self.H.extrapolated(u_prev, self._h))
+            return
+        M, w = self.M.x.array, 0.5 * self.k * self.g0
+        if u_prev is None:
+            self.H(M, scale=w, base=self.P)
+        else:
+            self.H.extrapolated(u_prev, M, scale=w, base=self.P)
+        self._written()
+
+    def _written(self) -> None:
+        """M was just written: take its sum now, while it is in cache (``finite`` reads it)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            self._sum = float(np.add.reduce(self.M.x.array))
+
+    def finite(self) -> bool:
+        """Whether M holds no NaN or inf, from the sum taken when this history last wrote M. After :meth:`state`
+        (a checkpoint may write M through it) M is summed again, until the next commit."""
+        return all_finite(self.M.x.array, self._sum)
 
     def state(self) -> dict[str, np.ndarray]:
+        self._sum = None  # the caller may write the arrays
         out = {"M": self.M.x.array}
         if self.P is not None:
             out["P"] = self.P
@@ -354,6 +507,7 @@ class PlaneStrainHistory(History):
     def __init__(self, main: History, out_of_plane: History) -> None:
         self.main, self.out_of_plane = main, out_of_plane
         self.M33 = out_of_plane.M
+        self.extrapolated = main.extrapolated  # History's class default (False) would hide the main one's
 
     def __getattr__(self, name: str):
         return getattr(self.main, name)
@@ -366,6 +520,11 @@ class PlaneStrainHistory(History):
         """The extrapolated trapezoid's current term for both (H_33 evaluated at the same, extrapolated, u)."""
         self.main.set_current(h)
         self.out_of_plane.set_current(self.out_of_plane.H())
+
+    def extrapolate(self, u_prev: np.ndarray | None) -> None:
+        """The extrapolated trapezoid's current term for both, at the same u*."""
+        self.main.extrapolate(u_prev)
+        self.out_of_plane.extrapolate(u_prev)
 
     def state(self) -> dict[str, np.ndarray]:
         return {**self.main.state(), **{f"zz_{k}": v for k, v in self.out_of_plane.state().items()}}

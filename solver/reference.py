@@ -58,6 +58,99 @@ def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
     return P
 
 
+def _locate(mesh, points: np.ndarray):
+    """The cell holding each point (2-D affine triangles), its vertices' coordinates and the point's reference
+    coordinates; raises if a point lies outside."""
+    from dolfinx import geometry
+
+    tdim = mesh.topology.dim
+    pts = np.zeros((len(points), 3))
+    pts[:, : points.shape[1]] = points
+    tree = geometry.BoundingBoxTree(mesh, tdim)
+    colliding = geometry.compute_colliding_cells(mesh, geometry.compute_collisions(tree, pts), pts)
+    offsets = colliding.offsets
+    if np.any(np.diff(offsets) == 0):
+        raise ValueError("a point lies outside the mesh")
+    cells = colliding.array[offsets[:-1]]
+    gdofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[cells]
+    X = mesh.geometry.x[gdofs][:, :, :2]
+    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
+    ref = np.linalg.solve(J, (pts[:, :2] - X[:, 0])[:, :, None])[:, :, 0]
+    return cells, J, ref
+
+
+def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(Dx, Dy): rows: points; columns: the nodes of V (a Lagrange space on affine triangles); Dx @ u gives
+    du/dx at the points (componentwise for a vector space, as :func:`interpolation_matrix`)."""
+    import basix
+
+    mesh = V.mesh
+    cells, J, ref = _locate(mesh, points)
+    degree = V.ufl_element().degree()
+    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree,
+                                   basix.LagrangeVariant.gll_warped)
+    tab = element.tabulate(1, ref)[1:, :, :, 0]  # (d/dX, d/dY) x point x local dof
+    Jinv_T = np.transpose(np.linalg.inv(J), (0, 2, 1))  # grad_x = J^{-T} grad_X
+    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab)  # (x/y, point, local dof)
+    ndofs = tab.shape[2]
+    cols = V.dofmap.list.array.reshape(-1, ndofs)[cells].ravel()
+    rows = np.repeat(np.arange(len(points)), ndofs)
+    size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    return tuple(sp.csr_matrix((grads[i].ravel(), (rows, cols)), shape=(len(points), size)) for i in range(2))
+
+
+class PointwiseError:
+    """The paper's error of a run on any mesh against a reference on another (serial, 2-D).
+
+    The integrals run over the judged run's own cells, with a degree-``q`` rule: eps(u_h) and
+    zeta_h there are polynomials, and the reference's strain and damage are evaluated at the
+    same points (located in the reference mesh). Nothing is interpolated onto a mesh that
+    does not hold the function exactly, so meshes need not nest (adapted meshes do not). It
+    is exact where the reference is smooth in a judged cell; where the reference's strain
+    jumps inside one (a finer reference), the rule integrates a discontinuity: against the
+    exact error of nested meshes this measured 0.3-0.6 % of the error
+    (tests/test_reference.py).
+    """
+
+    def __init__(self, V_ref, Z_ref, model, q: int = 4) -> None:
+        import basix
+        import ufl
+        from dolfinx import fem
+
+        mesh = model.geo.mesh
+        X, w = basix.make_quadrature(basix.CellType.triangle, q)
+        n_cells = mesh.topology.index_map(2).size_local
+        self.cells = np.arange(n_cells, dtype=np.int32)
+        nodes = mesh.geometry.dofmap.array.reshape(-1, 3)[:n_cells]
+        x = mesh.geometry.x[:, :2][nodes]  # (cell, vertex, xy)
+        J = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]], axis=2)
+        pts = x[:, 0][:, None, :] + np.einsum("cij,qj->cqi", J, X)
+        self.W = (w[None, :] * np.abs(np.linalg.det(J))[:, None]).ravel()
+        flat = pts.reshape(-1, 2)
+        self.Dx, self.Dy = gradient_matrices(V_ref, flat)
+        self.eps = fem.Expression(ufl.sym(ufl.grad(model.u)), X)
+        self.nq = len(w)
+        self.model = model
+        self.Pz = self.zeta = None
+        if model.damage is not None and Z_ref is not None:
+            self.Pz = interpolation_matrix(Z_ref, flat)
+            self.zeta = fem.Expression(model.damage.zeta, X)
+
+    def __call__(self, u_ref: np.ndarray, zeta_ref: np.ndarray | None) -> tuple[float, float]:
+        """(||eps(u_ref - u)||, ||zeta_ref - zeta||) for the judged model's current fields."""
+        u = u_ref.reshape(-1, 2)
+        gx, gy = self.Dx @ u, self.Dy @ u  # (point, component): d u_i / dx, d u_i / dy
+        e_ref = np.stack([gx[:, 0], 0.5 * (gy[:, 0] + gx[:, 1]), 0.5 * (gy[:, 0] + gx[:, 1]), gy[:, 1]], axis=1)
+        e_h = self.eps.eval(self.cells).reshape(-1, 4)
+        d = e_ref - e_h
+        eu = float(np.sqrt(max(np.einsum("p,pi,pi->", self.W, d, d), 0.0)))
+        ez = 0.0
+        if self.Pz is not None and zeta_ref is not None:
+            dz = self.Pz @ zeta_ref - self.zeta.eval(self.cells).ravel()
+            ez = float(np.sqrt(max(np.einsum("p,p,p->", self.W, dz, dz), 0.0)))
+        return eu, ez
+
+
 def scheme_fingerprint() -> str:
     """A hash of the solver's physics sources: a cached solution is reused only by the code that computed it."""
     here = Path(__file__).resolve().parent

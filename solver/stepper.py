@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -41,6 +40,7 @@ from .memory import (
     OutOfPlaneSource,
     PlaneStrainHistory,
     QuadratureRule,
+    all_finite,
     make_history,
     trapezoid_term,
 )
@@ -139,7 +139,7 @@ class Stepper:
                     clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
                     dkrylov += dinfo.krylov_iterations
                 if model.u_prev is not None:
-                    model.history.set_current(model.history.H())
+                    model.history.extrapolate(None)  # H(u_1, zeta_1), both predicted
                 again = model.mech.solve(t)
                 again.iterations += info.iterations
                 again.linear_solves += info.linear_solves
@@ -166,25 +166,21 @@ class Stepper:
         return row
 
     def _extrapolated_memory(self, n: int) -> None:
-        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); u keeps u_{n-1}."""
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); then u_prev = u_{n-1}.
+
+        H(u*) comes from the strains of u_{n-1} (just committed) and u_{n-2} by linearity: no third product."""
         model = self.model
-        u, u_prev = model.u.x.array, model.u_prev.x.array
-        last = u.copy()
-        if n >= 2:
-            u *= 2.0
-            u -= u_prev
-        model.history.set_current(model.history.H())
-        u[:] = last
-        u_prev[:] = last
+        model.history.extrapolate(model.u_prev.x.array if n >= 2 else None)
+        model.u_prev.x.array[:] = model.u.x.array
 
     def _check_finite(self) -> None:
         model = self.model
         bad = []
-        if not np.all(np.isfinite(model.u.x.array)):
+        if not all_finite(model.u.x.array):
             bad.append("displacement")
-        if model.damage is not None and not np.all(np.isfinite(model.damage.zeta.x.array)):
+        if model.damage is not None and not all_finite(model.damage.zeta.x.array):
             bad.append("damage")
-        if model.history is not None and not np.all(np.isfinite(model.history.M.x.array)):
+        if model.history is not None and not model.history.finite():
             bad.append("memory")
         bad = model.comm.allreduce(bad, op=MPI.SUM)
         if bad:
@@ -199,13 +195,17 @@ def writes_level(n: int, steps: int, every: int) -> bool:
 
 
 def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
-        restart: bool = False) -> list[dict]:
+        restart: bool = False, sensors: tuple = ()) -> list[dict]:
     """Run the model's scene; write results to ``outdir`` (None: nothing written). Returns the rows.
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
     after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
     it, and the new levels are appended. A write that fails (a full disk) stops the run with
     an OutputError that knows the step; what was written before stays readable.
+
+    ``sensors``: objects with ``columns`` and ``sensor(row) -> dict`` that add their columns to
+    every level's row and the CSV (e.g. the error estimates of a tolerance run); their time
+    counts as diagnostics.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
@@ -219,7 +219,8 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
     levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
     out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
-    columns = CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+    columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+               + tuple(c for s in sensors for c in s.columns))
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)
@@ -228,6 +229,11 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     try:
         for n in range(start, steps + 1):
             row = stepper.step(n)
+            if sensors:
+                t0 = time.perf_counter()
+                for sensor in sensors:
+                    row.update(sensor(row))
+                row["time_diagnostics"] += time.perf_counter() - t0
             try:
                 t0 = time.perf_counter()
                 if writes_level(n, steps, cfg.output.every):

@@ -429,7 +429,22 @@ def main(argv: list[str] | None = None) -> int:
                     "each needs its runs (u0, diagonal)")
     tv.add_argument("--no-search", action="store_true", help="skip the search over every combination of the "
                     "measurement-only choices")
+    to = sub.add_parser("tolerance", help="tolerance runs against a fine reference and the cheapest uniform choice "
+                        "(issue 14)")
+    from .tolerance_study import SCENES as TOL_SCENES
+    from .tolerance_study import TOLS
+
+    to.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
+    to.add_argument("--scenes", nargs="+", default=list(TOL_SCENES), choices=list(TOL_SCENES))
+    to.add_argument("--tols", type=float, nargs="+", default=list(TOLS))
+    to.add_argument("--ref-tol", type=float, default=1e-4, help="tolerance of the P2 reference run")
+    to.add_argument("--levels", type=int, default=6, help="uniform meshes per series (n = 4, 8, ... or r = 0, 1, ...)")
+    to.add_argument("--steps", type=int, nargs="+", default=[10, 20, 40, 80], help="uniform steps per run (T / k)")
     args = p.parse_args(argv)
+    if args.which == "tolerance":
+        from .tolerance_study import main as tolerance_main
+
+        return tolerance_main(args)
     if args.which == "table1-variants":
         from .table1_variants import main as table1_variants
 

@@ -24,3 +24,12 @@ def test_table_has_a_row_per_case_and_the_speedup_section():
     assert "mpirun -n 2" in text
     with pytest.raises(KeyError):
         _table({"sizes": [{"n": 1}]})
+
+
+def test_discretization_table_reports_the_source_apart_from_the_floor():
+    """The floor is unchanged; one memory-source evaluation is a column of its own with its own ratio."""
+    case = {"kernel": "p2-order1", "n": 64, "dofs_u": 33282, "step_ms": 9.0, "ratio": 2.0, "ratio_with_source": 1.5,
+            "floor_ms": {"total": 4.5, "memory_source": 1.5},
+            "split_ms": {"damage": 1.0, "memory": 1.2, "displacement": 5.0, "diagnostics": 0.8, "output": 0.0}}
+    text = _table({"sizes": [], "discretizations": [case]})
+    assert "| p2-order1 | 64 | 33282 | 9.00 | 1.00 | 1.20 | 5.00 | 4.50 | 2.00 | 1.50 | 1.50 |" in text

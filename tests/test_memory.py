@@ -230,3 +230,112 @@ def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
 
     assert level0(rule, 0.1) == pytest.approx(level0("left", 0.1), rel=1e-12)
     assert level0(rule, 0.05) == pytest.approx(level0("left", 0.1), rel=1e-12)
+
+
+@pytest.mark.parametrize("model_name", ["plane_stress", "plane_strain"])
+def test_extrapolated_current_term_is_its_definition(comm, model_name):
+    """time.order = 2, P2: after level n >= 2, M_n = P_n + (k/2) g(0) zeta_n Phi_L(A eps(u*)), u* = 2 u_{n-1} - u_{n-2},
+    against the UFL definition with the truncation acting; in plane strain M_33 likewise with (A eps)_33 =
+    lambda tr eps (the extrapolated term was once never set there: M stayed 0)."""
+    from conftest import ROOT
+
+    from solver.config import load
+    from solver.stepper import Stepper, build_model
+
+    L, k = 5.0, 0.1
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=3", "mesh.ny=3", "discretization.u_degree=2", "time.order=2",
+                                                f"time.k={k}", "time.T=0.5", f"memory.L={L}",
+                                                f"material.model='{model_name}'"])
+    model = build_model(cfg, comm)
+    hist = model.history
+    assert hist.extrapolated and model.u_prev is not None
+    main = hist.main if model_name == "plane_strain" else hist
+    E, nu = cfg.material.E, cfg.material.nu
+    lam = lame(E, nu, model_name)[0]
+    ustar = fem.Function(model.u.function_space)
+    rule = model.rule
+    ref = rule.evaluator(memory_source(ustar, model.zeta, lambda e: elasticity(e, E, nu, model_name), L),
+                         main.M.function_space)
+    raw = rule.evaluator(elasticity(strain(ustar), E, nu, model_name), main.M.function_space)
+    ref33 = rule.evaluator(model.zeta * ufl.max_value(-L, ufl.min_value(L, lam * ufl.tr(strain(ustar)))), rule.space(()))
+    weight = 0.5 * k * main.g0
+    stepper = Stepper(model)
+    us, acted = [], False
+    for n in range(5):
+        stepper.step(n)
+        if n >= 2:
+            ustar.x.array[:] = 2.0 * us[n - 1] - us[n - 2]
+            want = main.P + weight * ref()
+            assert np.allclose(main.M.x.array, want, rtol=1e-12, atol=1e-12 * np.abs(want).max()), n
+            acted |= comm.allreduce(np.abs(raw()).max(), op=MPI.MAX) > L
+            if model_name == "plane_strain":
+                zz = hist.out_of_plane
+                want33 = zz.P + weight * ref33()
+                assert np.allclose(zz.M.x.array, want33, rtol=1e-12, atol=1e-12 * np.abs(want33).max()), n
+                assert comm.allreduce(np.abs(zz.M.x.array).max(), op=MPI.MAX) > 0.0
+        us.append(model.u.x.array.copy())
+    assert acted
+
+
+@pytest.mark.parametrize("keep", [0, 2])
+def test_extrapolated_source_from_kept_strains(comm, keep):
+    """H(2 u - u_prev) by linearity of the strain equals the UFL definition at u* (truncation acting), and the
+    same bits whether the strains were kept or computed afresh (a restart keeps none)."""
+    m, u, zeta, rule = _setup(comm, 2)
+    u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 2)))
+    L = 150.0
+    fast = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), L, keep=keep)
+    fresh = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), L)
+    ustar = fem.Function(u.function_space)
+    ref = rule.evaluator(memory_source(ustar, zeta, A, L), fast.Q)
+    _drive(u, zeta, 2)
+    fast()
+    u_prev = u.x.array.copy()
+    _drive(u, zeta, 5)
+    fast()
+    ustar.x.array[:] = 2.0 * u.x.array - u_prev
+    a, b = fast.extrapolated(u_prev), ref()
+    assert np.allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    assert np.array_equal(a, fresh.extrapolated(u_prev))
+    assert len(fast._cache) == keep
+    raw = rule.evaluator(A(strain(ustar)), fast.Q)()
+    assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > L
+
+
+def test_equal_is_exact():
+    """The kept-strain lookup's comparison: a sample first, then every entry."""
+    from solver.memory import _equal
+
+    a = np.arange(1000.0)
+    b = a.copy()
+    assert _equal(a, b)
+    b[7] += 1e-13  # off the sample
+    assert not _equal(a, b)
+    assert not _equal(a, a[:-1]) and _equal(a[:0], b[:0])
+
+
+@pytest.mark.parametrize("values,finite", [([1.0, -2.0, 3.0], True), ([], True), ([1e308, 1e308], True),
+                                           ([1.0, np.nan], False), ([np.inf, 1.0], False), ([-np.inf, np.inf], False),
+                                           ([1e308, 1e308, np.nan], False)])
+def test_all_finite_decides_like_isfinite(values, finite):
+    """The one-sum NaN/inf test: an overflow of finite entries is not mistaken for an infinite one."""
+    from solver.memory import all_finite
+
+    a = np.array(values, dtype=float)
+    assert all_finite(a) is finite
+    assert finite == bool(np.all(np.isfinite(a)))
+
+
+def test_history_finite_sees_what_was_written_through_state(comm):
+    """PronyHistory.finite() uses the sum taken at the commit; a NaN written through state() (a checkpoint) is seen."""
+    cfg, _ = KERNELS["constant"]
+    m, u, zeta, rule = _setup(comm)
+    hist = make_history(cfg, rule, MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), cfg.L), 0.1, 3)
+    _drive(u, zeta, 1)
+    hist.commit(0)
+    assert hist.finite()
+    hist.state()["M"][0] = np.nan
+    assert not hist.finite()
+    hist.M.x.array[0] = 0.0
+    hist.commit(1)
+    assert hist.finite()

@@ -162,7 +162,7 @@ def test_rotation_left_free_by_the_dirichlet_parts_is_named(comm):
 
 @pytest.mark.parametrize("extra", [{}, {"discretization": {"u_degree": 2}, "time": {"order": 2}}], ids=["P1", "P2-order2"])
 def test_memory_force_is_the_assembled_coupling(comm, extra):
-    """B M through the strain operator (G^T W M) equals the assembled (M, eps(w)) to round-off, for a
+    """B M through the strain operator (E^T W m) equals the assembled (M, eps(w)) to round-off, for a
     memory tensor that is not symmetric and differs on every point."""
     from dolfinx import fem
     from dolfinx.fem import petsc as fpetsc

@@ -104,3 +104,4 @@ def test_observed_order_in_k(comm, order, low, high):
     errs = _paper_norm_errors(comm, order, ks, 0.1 / 64)
     rates = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
     assert all(low <= r <= high for r in rates), (errs, rates)
+

@@ -8,6 +8,7 @@ computation starts. See :mod:`solver.config.scene` for how sections are register
 """
 
 from ..errors import ConfigError
+from .accuracy import AccuracyConfig
 from .body_force import BodyForceConfig
 from .boundary import LAWS, PAPER_BOUNDARIES, ROLES, SIDES, BoundaryConfig, table_at
 from .damage import DamageConfig
@@ -21,6 +22,7 @@ from .solver import DAMAGE_SCHEMES, METHODS, SolverConfig
 from .time import TimeConfig
 
 __all__ = [
+    "AccuracyConfig",
     "BodyForceConfig", "BoundaryConfig", "Config", "ConfigError", "DamageConfig", "DiscretizationConfig", "MaterialConfig",
     "MemoryConfig", "MeshConfig", "OutputConfig", "SolverConfig", "TimeConfig", "SECTIONS", "PAPER_BOUNDARIES", "ROLES",
     "LAWS", "SIDES", "MODELS",

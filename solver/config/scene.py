@@ -17,7 +17,8 @@ from typing import Any, NamedTuple
 import tomlkit
 
 from ..errors import ConfigError
-from . import body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
+from . import accuracy, body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
+from .accuracy import AccuracyConfig
 from .body_force import BodyForceConfig
 from .boundary import BoundaryConfig
 from .damage import DamageConfig
@@ -52,6 +53,7 @@ SECTIONS: tuple[Section, ...] = (
     Section("damage", "damage", damage.parse, damage.to_toml, {}),
     Section("solver", "solver", solver.parse, solver.to_toml, {}),
     Section("output", "output", output.parse, output.to_toml, {}),
+    Section("accuracy", "accuracy", accuracy.parse, accuracy.to_toml, {}),
 )
 
 
@@ -69,6 +71,7 @@ class Config:
     time: TimeConfig = field(default_factory=TimeConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    accuracy: AccuracyConfig = field(default_factory=AccuracyConfig)
     source: str = "<defaults>"
 
     @property

@@ -1,0 +1,465 @@
+"""Accuracy on demand: the degree, the mesh and the step that bring the paper's error below a tolerance.
+
+The error is the paper's norm, max over levels of ||eps(u - u_exact)|| + ||zeta - zeta_exact||_L2
+(docs/model.md §3.6). It is bounded by a space part and a time part, each given a share of TOL
+(``accuracy.space_share``, default one half):
+
+- **space, displacement** -- the residual estimator (solver/estimator.py) times a constant C
+  measured against known errors (``study estimator``: C = error/eta is 3.0-3.9e-3 for P1 and
+  1.55-1.74e-3 for P2 on Example 1, E = 100, nu = 0.3, uniform and adapted meshes). C scales
+  as 1/(2 mu) (eta is a stress, the error a strain), so C = c_p / (2 mu) with the largest
+  measured values rounded up.
+  The t = 0 problem is solved on meshes refined by Dörfler marking until C eta_0 times the
+  growth of eta over the run (measured on the start mesh) is within its share;
+- **space, damage** -- the difference of zeta on the start mesh and on its uniform refinement,
+  at the same step (a first-order bound: twice the difference); the adapted mesh is finer;
+- **time** -- step doubling on the start mesh: runs at k0, k0/2 and k0/4 (k0 = T/10) give
+  the observed order p (at most the scheme's) and the error of k0/4, D/(2^p - 1); the step
+  is the largest T/(10 2^j) whose extrapolated error is within its share (times 0.8).
+
+The degree is chosen by predicted cost: the t = 0 problem is solved once per degree on the
+start mesh, the measured rates of adapted meshes (error ~ dofs^-0.49 for P1, dofs^-1.02 for
+P2, ``study estimator``) extrapolate the dofs each needs, and the cost per dof and step is
+measured (P2 is 1.13x P1 at equal dofs, benchmarks/results/bench.md). The t = 0 solves use the
+scene without memory and damage (level 0 is the elastic contact problem, which neither
+touches), which is cheaper to build. The order in time is 2 where the scene
+allows it (the same cost per step, far fewer steps), else 1. The mesh is then fixed for the
+run: no history moves between meshes.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from .errors import ConfigError, SolveFailure, ToleranceError
+
+# C times 2 mu (mu the shear modulus E / (2 (1 + nu))): C measured on Example 1 (E = 100, nu = 0.3), rounded up
+C_TIMES_2MU = {1: 4.0e-3 * 100.0 / 1.3, 2: 1.8e-3 * 100.0 / 1.3}
+COST_PER_DOF = {1: 1.0, 2: 1.13}  # bench.md: P1 n=128 9.70 ms, P2 n=64 10.94 ms per step, both 33,282 dofs
+N0 = 10  # the coarsest step is T / N0; every step considered is T / (N0 2^j)
+SAFETY = 0.8
+ADAPTED_RATE = {1: 0.49, 2: 1.02}  # error ~ dofs^-rate on Dörfler-adapted meshes (estimator.md, Example 1)
+GROWTH_AT_0 = 1.5  # eta growing more over the run: adapt to its largest level instead of t = 0
+ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
+CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "time.order")
+
+
+@dataclass
+class Plan:
+    """What the tolerance chose, and the estimates behind it."""
+
+    tolerance: float  # absolute
+    degree: int
+    order: int
+    k: float
+    geo: object  # Geometry of the chosen (adapted) mesh
+    start: list[str]  # overrides of the start mesh
+    estimate: dict[str, float]  # space_u, space_zeta, time: each a bound of its part
+    C: float
+    growth: float
+    time_rate: float
+    time_profile: tuple[np.ndarray, np.ndarray]  # (t, estimated time error at k) from the pilot runs
+    adaptation: list[dict] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def overrides(self) -> list[str]:
+        """The scene overrides of the chosen degree, order and step (the mesh is ``geo``)."""
+        return [*self.start, f"discretization.u_degree={self.degree}", f"time.order={self.order}", f"time.k={self.k!r}"]
+
+    def time_error(self, t: float) -> float:
+        ts, es = self.time_profile
+        i = int(np.searchsorted(ts, t + 1e-12 * max(1.0, t), side="right")) - 1
+        return float(es[max(i, 0)]) if len(es) else 0.0
+
+    def summary(self) -> dict:
+        return {"tolerance": self.tolerance, "u_degree": self.degree, "order": self.order, "k": self.k,
+                "cells": self.geo.num_cells(), "estimate": self.estimate, "C": self.C, "growth": self.growth,
+                "time_rate": self.time_rate,
+                "adaptation": [{k: v for k, v in r.items() if not k.startswith("_")} for r in self.adaptation],
+                "planning_seconds": self.seconds}
+
+
+def contradicting(overrides: list[str]) -> list[str]:
+    """The ``--set`` overrides a tolerance decides itself (mesh size, step, degree, order)."""
+    return [o for o in overrides if o.split("=", 1)[0].strip() in CHOSEN_KEYS]
+
+
+def _load(path: Path, overrides: list[str]):
+    from .config import load
+
+    return load(path, [*overrides, "output.xdmf=false"])
+
+
+def _start_mesh(path: Path, overrides: list[str], comm: MPI.Comm) -> list[str]:
+    """A coarse start for a built-in rectangle: about 4 cells across its shorter side (doubled until the boundary
+    parts' ends fall on nodes); a gmsh mesh starts as it is."""
+    from .geometry import build
+
+    cfg = _load(path, overrides)
+    if cfg.mesh.kind != "rectangle":
+        return []
+    (x0, y0), (x1, y1) = cfg.mesh.corners
+    h = min(x1 - x0, y1 - y0) / 4
+    for scale in (1, 2, 4, 8, 16):
+        nx, ny = max(1, round((x1 - x0) / h)) * scale, max(1, round((y1 - y0) / h)) * scale
+        start = [f"mesh.nx={nx}", f"mesh.ny={ny}"]
+        try:
+            build(comm, _load(path, [*overrides, *start]).mesh, cfg.boundaries, cfg.dim)
+            return start
+        except ConfigError:
+            continue
+    return []
+
+
+def _order(path: Path, overrides: list[str]) -> int:
+    """2 where the scene allows the second-order scheme, else 1."""
+    try:
+        _load(path, [*overrides, "time.order=2"])
+        return 2
+    except ConfigError:
+        return 1
+
+
+def _elastic(cfg):
+    """The scene without memory and damage: its level 0 (the elastic contact problem) is the same."""
+    from .config import from_dict, to_dict
+
+    data = to_dict(cfg)
+    data["memory"] = {"kernel": "none"}
+    data["damage"] = {"enabled": False}
+    return from_dict(data, source=cfg.source)
+
+
+class _Level0:
+    """The t = 0 problem on a mesh: its solution, eta_K^2 and eta."""
+
+    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
+        from .estimator import estimator_for
+        from .stepper import Stepper, build_model
+
+        cfg = _elastic(_load(path, overrides))
+        self.model = build_model(cfg, comm, geo)
+        row = Stepper(self.model).step(0)
+        self.strain_norm = row["strain_norm"]
+        est = estimator_for(self.model)
+        self.eta2 = est.cells()
+        self.eta = est.total(self.eta2)
+        self.dofs = self.model.u.function_space.dofmap.index_map.size_global * self.model.u.function_space.dofmap.index_map_bs
+
+
+class _Worst:
+    """A coarse-step run on a mesh (to the scene's T as overridden): eta and eta_K^2 at its level of largest eta
+    (scenes whose load starts at zero have nothing to adapt to at t = 0). A step Newton cannot take on a finer
+    mesh is halved (up to 3 times)."""
+
+    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
+        from .estimator import estimator_for
+        from .stepper import build_model, run
+
+        cfg = _load(path, overrides)
+        for halving in range(4):
+            k = cfg.time.k / 2**halving
+            self.model = model = build_model(_load(path, [*overrides, f"time.k={k!r}"]), comm, geo)
+            est = estimator_for(model)
+            worst: list = [-1.0, None]
+
+            def keep(row, est=est, worst=worst):
+                eta2 = est.cells()
+                eta = est.total(eta2)
+                if eta > worst[0]:
+                    worst[:] = [eta, eta2]
+
+            try:
+                run(model, None, on_step=keep)
+                break
+            except SolveFailure:
+                if halving == 3:
+                    raise
+        self.eta, self.eta2 = worst
+        imap = model.u.function_space.dofmap.index_map
+        self.dofs = imap.size_global * model.u.function_space.dofmap.index_map_bs
+
+
+def _theta(theta: float, ratio: float) -> float:
+    """The Dörfler fraction: ``theta`` near the target; far from it (estimate/target > 4) a larger one, so
+    that fewer solve-estimate-refine rounds are needed (each is a mesh to build)."""
+    return theta if ratio <= 4.0 else max(theta, 0.8)
+
+
+def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, theta: float, max_dofs: int,
+           max_steps: int | None, seq: list[dict], log, marked=None, level=None) -> tuple[object, np.ndarray | None]:
+    """Dörfler-refine until C eta_0 <= target (or ``max_steps`` meshes solved), appending each mesh's record to
+    ``seq``. ``marked``: (geo, eta2) of a mesh already solved, to refine first. ``level``: what is solved on a
+    mesh (:class:`_Level0`, the default, or :class:`_Worst`). Returns the last mesh and its eta_K^2."""
+    from .adapt import refine
+    from .estimator import dorfler
+
+    if marked is not None:
+        geo = refine(marked[0], np.flatnonzero(dorfler(marked[1], _theta(theta, seq[-1]["estimate"] / target), comm)))
+    solved = 0
+    while True:
+        lv = (level or _Level0)(path, [*overrides, f"discretization.u_degree={degree}"], comm, geo)
+        rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
+               "estimate": C * lv.eta, "_geo": lv.model.geo}
+        seq.append(rec)
+        solved += 1
+        log(f"  P{degree}: {rec['cells']} cells, {rec['dofs']} dofs, C eta = {rec['estimate']:.3e} (target {target:.3e})")
+        if rec["estimate"] <= target or (max_steps is not None and solved >= max_steps):
+            return lv.model.geo, lv.eta2
+        if rec["dofs"] > max_dofs:
+            raise ToleranceError(target, rec["estimate"], rec["dofs"], "accuracy.max_dofs")
+        geo = refine(lv.model.geo, np.flatnonzero(dorfler(lv.eta2, _theta(theta, rec["estimate"] / target), comm)))
+
+
+class _Pilot:
+    """A run on a fixed mesh that keeps u and zeta at every level (and eta_n with ``estimate``)."""
+
+    def __init__(self, path, overrides, comm, geo, estimate: bool = False) -> None:
+        from .estimator import estimator_for
+        from .stepper import build_model, run
+
+        cfg = _load(path, overrides)
+        self.model = model = build_model(cfg, comm, geo)
+        est = estimator_for(model) if estimate else None
+        self.u, self.zeta, self.eta, self.t = [], [], [], []
+
+        def keep(row):
+            self.t.append(row["t"])
+            self.u.append(model.u.x.array.copy())
+            if model.damage is not None:
+                self.zeta.append(model.damage.zeta.x.array.copy())
+            if est is not None:
+                self.eta.append(est.total())
+
+        run(model, None, on_step=keep)
+
+
+def _norms(model, comm: MPI.Comm):
+    """||eps(v)|| and ||z|| of arrays on the model's spaces (collective)."""
+    import ufl
+    from dolfinx import fem
+
+    V = model.u.function_space
+    dv = fem.Function(V)
+    eps = ufl.sym(ufl.grad(dv))
+    fu = fem.form(ufl.inner(eps, eps) * ufl.dx)
+    fz = dz = None
+    if model.damage is not None:
+        dz = fem.Function(model.damage.V)
+        fz = fem.form(dz * dz * ufl.dx)
+
+    def norm_u(a: np.ndarray) -> float:
+        dv.x.array[:] = a
+        return math.sqrt(max(comm.allreduce(fem.assemble_scalar(fu), op=MPI.SUM), 0.0))
+
+    def norm_z(a: np.ndarray) -> float:
+        if fz is None:
+            return 0.0
+        dz.x.array[:] = a
+        return math.sqrt(max(comm.allreduce(fem.assemble_scalar(fz), op=MPI.SUM), 0.0))
+
+    return norm_u, norm_z
+
+
+def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """From runs at k, k/2, k/4 on one mesh: (observed order p, error of the k/4 run, times, error profile of the
+    k/4 run at the k/2 levels)."""
+    norm_u, norm_z = _norms(runs[0].model, comm)
+
+    def diff(a: _Pilot, b: _Pilot) -> np.ndarray:
+        out = []
+        for j in range(len(a.t)):
+            d = norm_u(a.u[j] - b.u[2 * j])
+            if a.zeta:
+                d += norm_z(a.zeta[j] - b.zeta[2 * j])
+            out.append(d)
+        return np.array(out)
+
+    d1, d2 = diff(runs[0], runs[1]), diff(runs[1], runs[2])
+    m1, m2 = float(d1.max()), float(d2.max())
+    if m2 <= 1e-14 * max(1.0, m1):
+        return float(order), 0.0, np.array(runs[1].t), np.zeros(len(d2))
+    p = math.log2(m1 / m2) if m1 > 0 else float(order)
+    p = min(max(p, 0.5), float(order))
+    return p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1)
+
+
+def _zeta_difference(path, overrides, comm, coarse_geo, fine_geo) -> float:
+    """max over levels of ||zeta_coarse - zeta_fine|| for runs at the same step on two nested meshes (the time
+    error cancels); 0 without damage."""
+    import ufl
+    from dolfinx import fem
+
+    from .reference import interpolation_matrix
+
+    coarse = _Pilot(path, overrides, comm, coarse_geo)
+    if not coarse.zeta:
+        return 0.0
+    fine = _Pilot(path, overrides, comm, fine_geo)
+    Zf = fine.model.damage.V
+    owned = Zf.dofmap.index_map.size_local
+    P = interpolation_matrix(coarse.model.damage.V, Zf.tabulate_dof_coordinates()[:owned, :2])
+    d = fem.Function(Zf)
+    form = fem.form(d * d * ufl.dx)
+    worst = 0.0
+    for zc, zf in zip(coarse.zeta, fine.zeta):
+        d.x.array[:owned] = zf[:owned] - P @ zc
+        d.x.scatter_forward()
+        worst = max(worst, math.sqrt(max(comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM), 0.0)))
+    return worst
+
+
+def _zeta_space(path, overrides, comm, geo, earlier=None) -> tuple[float, object | None]:
+    """Estimate of zeta's space error on ``geo``: from the difference D to an ``earlier`` mesh that ``geo``
+    refines (h shrinks by rho = sqrt(cells ratio)), e = D rho / (1 - rho); without one, from ``geo``'s uniform
+    refinement, e = 2 D. Both assume a rate of at least 1 in h (P1 zeta converges faster where it is smooth).
+    Returns the estimate and the uniform refinement (or None)."""
+    from .adapt import refine
+
+    if earlier is not None:
+        rho = math.sqrt(earlier.num_cells() / geo.num_cells())
+        return _zeta_difference(path, overrides, comm, earlier, geo) * rho / (1.0 - rho), None
+    tdim = geo.mesh.topology.dim
+    finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
+    return 2.0 * _zeta_difference(path, overrides, comm, geo, finer), finer
+
+
+def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
+    """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
+    from .geometry import build
+
+    t_start = time.perf_counter()
+    cfg = _load(path, overrides)
+    acc = cfg.accuracy
+    if not acc.enabled:
+        raise ValueError("plan: the scene has no accuracy.tolerance")
+    start = _start_mesh(path, overrides, comm)
+    base = [*overrides, *start]
+    order = _order(path, base)
+    T = cfg.time.T
+    k0 = T / N0
+    base = [*base, f"time.order={order}"]
+    geo0 = build(comm, _load(path, base).mesh, cfg.boundaries, cfg.dim)
+    two_mu = cfg.material.E / (1.0 + cfg.material.nu)
+    Cs = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
+    tol = acc.tolerance
+    if acc.relative:
+        lv = _Level0(path, [*base, f"discretization.u_degree={max(acc.degrees)}"], comm, geo0)
+        tol = acc.tolerance * lv.strain_norm
+        log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {tol:.4g}")
+    share_s = acc.space_share * tol
+    share_t = (1.0 - acc.space_share) * tol
+
+    # 1. on the start mesh, with the highest degree: the step (step doubling) and how eta evolves over the run
+    pilot = [*base, f"discretization.u_degree={max(acc.degrees)}"]
+    pilots: list[_Pilot] = []
+    for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
+        try:
+            pilots = [_Pilot(path, [*pilot, f"time.k={k0 / 2**j!r}"], comm, geo0, estimate=(j == 0))
+                      for j in range(3)]
+            break
+        except SolveFailure:
+            k0 /= 2
+    else:
+        raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+    p, e_k4, ts, profile = _time_estimate(pilots, order, comm)
+    eta = np.array(pilots[0].eta)
+    worst = int(np.argmax(eta))
+    growth = float(eta[worst] / eta[0]) if eta[0] > 0 else math.inf
+    log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} over the run")
+    j = 0
+    k4 = k0 / 4
+    while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share_t:
+        j += 1
+        if j > 20:
+            raise ToleranceError(tol, e_k4, 0, "time.k")
+    k = k0 / 2**j
+    scale = (k / k4) ** p if e_k4 > 0 else 0.0
+    base_full = [*base, f"time.k={k0!r}"]
+    # the space estimate: the t = 0 problem times the growth, or, where eta grows more than GROWTH_AT_0 (a load
+    # that starts small), coarse-step runs to the level of largest eta (their largest eta counts)
+    base = [*base, f"time.k={k0!r}"]
+    level, g = _Level0, growth
+    if growth > GROWTH_AT_0:
+        level, g = _Worst, 1.0
+        base = [*base, f"time.T={pilots[0].t[worst]!r}"]
+        log(f"  the mesh is adapted to the level of largest eta, t = {pilots[0].t[worst]:g}")
+
+    # 2. the degree: one solve of each on the start mesh; the dofs each needs by the adapted rate
+    seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
+    last: dict[int, tuple] = {}
+    cost = {}
+    for d in acc.degrees:
+        last[d] = _adapt(path, base, comm, geo0, d, Cs[d], share_s / g, acc.theta, acc.max_dofs, 1, seqs[d], log,
+                         level=level)
+        first = seqs[d][0]
+        needed = first["dofs"] * max(first["estimate"] * g / share_s, 1.0) ** (1.0 / ADAPTED_RATE[d])
+        cost[d] = COST_PER_DOF[d] * needed
+    degree = min(acc.degrees, key=lambda d: cost[d])
+    log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in acc.degrees)
+        + f" -> P{degree}")
+    chosen = [*base, f"discretization.u_degree={degree}"]
+
+    # 3. the mesh: adapt the chosen degree on until C eta_0 growth + zeta's part is within the space share
+    target = (1.0 - ZETA_SHARE) * share_s / max(g, 1.0)
+    geo, eta2 = last[degree]
+    if seqs[degree][-1]["estimate"] > target:  # go on from the probe's last mesh
+        geo, _ = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
+                        seqs[degree], log, marked=(geo, eta2), level=level)
+    best = seqs[degree][-1]
+    # 4. zeta's space error on the chosen mesh (against an earlier mesh of the sequence with at most a quarter
+    # of its cells, or its uniform refinement); refined uniformly while the two space parts exceed the share
+    run_k0 = [*base_full, f"discretization.u_degree={degree}"]
+    earlier = [r["_geo"] for r in seqs[degree] if "_geo" in r and r["cells"] * 4 <= best["cells"]]
+    zeta_space, finer = _zeta_space(path, run_k0, comm, geo, earlier[-1] if earlier else None)
+    log(f"  zeta's space error on it <= {zeta_space:.3e}")
+    while best["estimate"] * max(g, 1.0) + zeta_space > share_s:
+        if finer is None:
+            zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
+            continue
+        if finer.num_cells() * 2 * degree**2 > acc.max_dofs:
+            raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)")
+        geo = finer
+        zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
+        lv = level(path, chosen, comm, geo)
+        best = {"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
+                "estimate": Cs[degree] * lv.eta, "uniform": True}
+        seqs[degree].append(best)
+        log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {best['estimate']:.3e}, zeta's space error <= "
+            f"{zeta_space:.3e}")
+    estimate = {"space_u": best["estimate"] * max(g, 1.0), "space_zeta": zeta_space, "time": e_k4 * scale}
+    out = Plan(tol, degree, order, k, geo, start, estimate, Cs[degree], growth, p, (ts, profile * scale),
+               [r for d in acc.degrees for r in seqs[d]])
+    out.seconds = time.perf_counter() - t_start
+    log(f"chosen: P{degree}, order {order}, k = {k:g} ({round(T / k)} steps), {geo.num_cells()} cells; "
+        f"estimated error <= {sum(estimate.values()):.3e} (space {estimate['space_u'] + zeta_space:.3e}, "
+        f"time {estimate['time']:.3e}) for TOL {tol:.3e}; planned in {out.seconds:.1f} s")
+    return out
+
+
+class ErrorSensor:
+    """The run's estimated error per level: C eta_n (+ zeta's bound) and the time error of the plan (CSV columns)."""
+
+    columns = ("est_space", "est_time")
+
+    def __init__(self, model, plan: Plan) -> None:
+        from .estimator import estimator_for
+
+        self.est = estimator_for(model)
+        self.plan = plan
+        self.worst = {"space": 0.0, "time": 0.0, "total": 0.0}
+
+    def __call__(self, row: dict) -> dict:
+        space = self.plan.C * self.est.total() + self.plan.estimate["space_zeta"]
+        tim = self.plan.time_error(row["t"])
+        self.worst["space"] = max(self.worst["space"], space)
+        self.worst["time"] = max(self.worst["time"], tim)
+        self.worst["total"] = max(self.worst["total"], space + tim)
+        return {"est_space": space, "est_time": tim}

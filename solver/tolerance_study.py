@@ -1,0 +1,357 @@
+"""``study tolerance``: does a run with a tolerance reach it, and at what cost against the best uniform choice?
+
+For every scene (Examples 1-3, configs/hard.toml, Example 1 with a gap of 0.02 and with
+mu = 1e-3) and every tolerance, the tolerance run (solver/accuracy.py) is measured against a
+fine reference in the paper's norm (max over levels of ||eps(u - u_ref)|| + ||zeta - zeta_ref||),
+with :class:`reference.PointwiseError` (the adapted meshes do not nest in the reference's).
+The reference is itself a P2, second-order tolerance run at ``ref_tol``, with a step a few
+times smaller than any judged; its own error is estimated by a second reference at
+3 ``ref_tol``. The uniform runs ((P1, P2) x (order 1, 2) x meshes x steps T/10 ... T/80,
+measured against the same reference) give the cheapest uniform choice that meets each
+tolerance. Cost: seconds of computing after the scene is read -- the time loop, and for the
+tolerance run also its planning (every solve, estimate and pilot run); the set-up of the
+final model and form compilation are left out on both sides (forms are compiled before
+anything is timed). Writes tolerance.csv, tolerance.json, tolerance.md and tolerance.png.
+"""
+
+from __future__ import annotations
+
+import csv
+import gc
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+SCENES = {
+    "example1": (CONFIGS / "example1.toml", []),
+    "example2": (CONFIGS / "example2.toml", []),
+    "example3": (CONFIGS / "example3.toml", []),
+    "hard": (CONFIGS / "hard.toml", []),
+    "example1-gap0.02": (CONFIGS / "example1.toml", ["boundary.bottom.gap=0.02"]),
+    "example1-mu1e-3": (CONFIGS / "example1.toml", ["boundary.bottom.mu=1e-3"]),
+}
+TOLS = (1e-2, 3e-3, 1e-3)
+QUIET = ["output.xdmf=false"]
+MAX_DOFS = 300_000  # per run of the study (the tolerance runs' accuracy.max_dofs, and the uniform meshes)
+
+
+class Reference:
+    """A tolerance run kept at every level (u, zeta) on its own adapted mesh."""
+
+    def __init__(self, path: Path, overrides: list[str], tol: float, refine_k: int, log=print) -> None:
+        from .accuracy import plan
+        from .config import load
+        from .stepper import build_model, run
+
+        t0 = time.perf_counter()
+        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
+                        f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
+        from .errors import SolveFailure
+
+        for halving in range(3):  # a step Newton cannot take on the fine mesh is halved
+            self.k = p.k / refine_k / 2**halving
+            cfg = load(path, [*overrides, *QUIET, *p.overrides, f"time.k={self.k!r}"])
+            self.model = model = build_model(cfg, MPI.COMM_SELF, p.geo)
+            self.u, self.zeta = [], []
+
+            def keep(row, model=model):
+                self.u.append(model.u.x.array.copy())
+                self.zeta.append(model.damage.zeta.x.array.copy() if model.damage is not None else None)
+
+            try:
+                run(model, None, on_step=keep)
+                break
+            except SolveFailure:
+                if halving == 2:
+                    raise
+                log(f"  reference: Newton failed at k = {self.k:g}; halving the step")
+        self.plan = p
+        self.seconds = time.perf_counter() - t0
+        self.dofs = model.u.x.array.size
+        log(f"  reference: TOL {tol:g}, P2 order {p.order}, {p.geo.num_cells()} cells ({self.dofs} dofs), k = {self.k:g}"
+            f", estimate {sum(p.estimate.values()):.2e}; {self.seconds:.1f} s")
+
+    def level(self, t: float) -> int | None:
+        m = t / self.k
+        return int(round(m)) if abs(m - round(m)) < 1e-9 and round(m) < len(self.u) else None
+
+    def measure(self, model, extra_seconds: float = 0.0) -> dict:
+        """Run ``model`` (built, not yet run) and return its error against this reference and its cost."""
+        from .errors import SolveFailure
+        from .reference import PointwiseError
+        from .stepper import run
+
+        judge = PointwiseError(self.model.u.function_space,
+                               self.model.damage.V if self.model.damage is not None else None, model)
+        errs, loop = [], [0.0]
+
+        def compare(row):
+            loop[0] += row["wall_time"]
+            j = self.level(row["t"])
+            if j is not None:
+                eu, ez = judge(self.u[j], self.zeta[j])
+                errs.append((row["t"], eu, ez))
+
+        failure = None
+        try:
+            run(model, None, on_step=compare)
+        except SolveFailure as exc:
+            failure = exc.status
+        e = np.array(errs) if errs else np.full((1, 3), np.nan)
+        total = e[:, 1] + e[:, 2]
+        m = int(np.nanargmax(total)) if np.isfinite(total).any() else 0
+        return {"error": float(total[m]), "error_u": float(e[m, 1]), "error_zeta": float(e[m, 2]),
+                "t_max": float(e[m, 0]), "loop_seconds": loop[0], "cost": loop[0] + extra_seconds,
+                "levels": len(errs), "failure": failure, "dofs": int(model.u.x.array.size)}
+
+
+def _uniform_meshes(path: Path, overrides: list[str], levels: int):
+    """(label, overrides, geo or None) of uniform meshes: n = 4, 8, ... on a rectangle (cells about square),
+    the scene's mesh refined uniformly 0, 1, ... times otherwise."""
+    from .adapt import refine
+    from .config import load
+    from .geometry import build
+
+    cfg = load(path, [*overrides, *QUIET])
+    if cfg.mesh.kind == "rectangle":
+        (x0, y0), (x1, y1) = cfg.mesh.corners
+        short = min(x1 - x0, y1 - y0)
+        for i in range(levels):
+            n = 4 * 2**i
+            yield f"n={n}", [f"mesh.nx={round(n * (x1 - x0) / short)}", f"mesh.ny={round(n * (y1 - y0) / short)}"], None
+        return
+    geo = build(MPI.COMM_SELF, cfg.mesh, cfg.boundaries, cfg.dim)
+    for r in range(min(levels, 3)):  # a gmsh mesh is already fine: 16x its cells at r = 2
+        yield f"r={r}", [], geo
+        geo = refine(geo, np.arange(geo.mesh.topology.index_map(2).size_local))
+
+
+def uniform_sweep(ref: Reference, path: Path, overrides: list[str], tols, levels: int, steps: tuple[int, ...],
+                  log=print) -> list[dict]:
+    """Every (degree, order, mesh, step) until the mesh no longer helps or the smallest tolerance is met."""
+    from .config import load
+    from .stepper import build_model
+
+    T = load(path, [*overrides, *QUIET]).time.T
+    rows = []
+    for degree in (1, 2):
+        for order in (1, 2):
+            for n_steps in steps:
+                k = T / n_steps
+                last = np.inf
+                for label, mesh_over, geo in _uniform_meshes(path, overrides, levels):
+                    cfg = load(path, [*overrides, *QUIET, *mesh_over, f"discretization.u_degree={degree}",
+                                      f"time.order={order}", f"time.k={k!r}"])
+                    model = build_model(cfg, MPI.COMM_SELF, geo)
+                    if model.u.x.array.size > MAX_DOFS:
+                        break
+                    rec = ref.measure(model)
+                    del model
+                    gc.collect()  # PETSc objects in reference cycles: free each run's factorization now
+                    rec.update({"degree": degree, "order": order, "mesh": label, "k": k})
+                    rows.append(rec)
+                    log(f"  uniform P{degree} order {order} {label:6s} k={k:<7g} error {rec['error']:.3e} "
+                        f"cost {rec['cost']:.3f} s")
+                    if rec["failure"] or rec["error"] <= min(tols) or rec["error"] > 0.9 * last:
+                        break  # finer meshes cost more and meet no more tolerances, or the step dominates
+                    last = rec["error"]
+    return rows
+
+
+def cheapest(rows: list[dict], tol: float) -> dict | None:
+    ok = [r for r in rows if not r["failure"] and r["error"] <= tol]
+    return min(ok, key=lambda r: r["cost"]) if ok else None
+
+
+def tolerance_run(ref: Reference, path: Path, overrides: list[str], tol: float, log=print) -> dict:
+    """Plan and run at ``tol``; the error against the reference, the cost (planning + loop) and the estimate."""
+    from .accuracy import ErrorSensor, plan
+    from .config import load
+    from .errors import SolveFailure, ToleranceError
+    from .stepper import build_model
+
+    t0 = time.perf_counter()
+    try:
+        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF,
+                 log=lambda *a: None)
+    except (ToleranceError, SolveFailure) as exc:
+        log(f"  TOL {tol:g}: out of reach ({exc})")
+        return {"tolerance": tol, "out_of_reach": str(exc), "planning_seconds": time.perf_counter() - t0}
+    planning = time.perf_counter() - t0
+    cfg = load(path, [*overrides, *QUIET, f"accuracy.tolerance={tol!r}", *p.overrides])
+    model = build_model(cfg, MPI.COMM_SELF, p.geo)
+    sensor = ErrorSensor(model, p)
+    sensor_rows = []
+    # the sensor (the run's own estimate) is evaluated after the measurement, outside the timed loop
+    rec = ref.measure(model, extra_seconds=planning)
+    sensor_rows.append(sensor({"t": cfg.time.T}))
+    cells = p.geo.num_cells()
+    del model, sensor
+    p.geo = None
+    gc.collect()
+    rec.update({"tolerance": tol, "degree": p.degree, "order": p.order, "k": p.k, "cells": cells,
+                "planning_seconds": planning, "estimate": sum(p.estimate.values()), "estimate_parts": p.estimate,
+                "estimate_final_level": sensor_rows[-1]["est_space"] + sensor_rows[-1]["est_time"]})
+    log(f"  TOL {tol:g}: P{p.degree} order {p.order} k={p.k:g} {rec['cells']} cells: error {rec['error']:.3e} "
+        f"(estimate {rec['estimate']:.3e}) cost {rec['cost']:.3f} s (planning {planning:.3f} s)")
+    return rec
+
+
+def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, steps, log=print) -> dict:
+    """Every scene in turn; scenes already in ``out``/tolerance.json (same tolerances) are kept, not redone."""
+    out.mkdir(parents=True, exist_ok=True)
+    result = {"tolerances": list(tols), "ref_tol": ref_tol, "scenes": {}}
+    old = out / "tolerance.json"
+    if old.exists():
+        earlier = json.loads(old.read_text())
+        if earlier.get("tolerances") == list(tols) and earlier.get("ref_tol") == ref_tol:
+            result["scenes"] = {k: v for k, v in earlier["scenes"].items()
+                                if k in scenes and "failure" not in v["reference"]}
+    for name in scenes:
+        if name in result["scenes"]:
+            log(f"{name}: kept from {old}")
+            continue
+        path, overrides = SCENES[name]
+        log(f"{name}:")
+        from .config import load
+        from .errors import SolveFailure, ToleranceError
+        from .stepper import build_model
+
+        try:
+            ref = Reference(path, overrides, ref_tol, 4, log=log)
+            second = Reference(path, overrides, 3 * ref_tol, 2, log=log)
+        except (ToleranceError, SolveFailure) as exc:
+            log(f"  no reference: {exc}")
+            result["scenes"][name] = {"reference": {"failure": str(exc)}, "runs": [], "uniform": []}
+            _write(result, out)
+            continue
+
+        cfg2 = load(path, [*overrides, *QUIET, *second.plan.overrides, f"time.k={second.k!r}"])
+        ref_check = ref.measure(build_model(cfg2, MPI.COMM_SELF, second.plan.geo))
+        log(f"  reference at 3 x {ref_tol:g} against it: {ref_check['error']:.2e}")
+        uniform = uniform_sweep(ref, path, overrides, tols, levels, steps, log=log)
+        runs = []
+        for tol in tols:
+            rec = tolerance_run(ref, path, overrides, tol, log=log)
+            if "out_of_reach" in rec:
+                runs.append(rec)
+                continue
+            best = cheapest(uniform, tol)
+            rec["uniform_best"] = None if best is None else {key: best[key] for key in
+                                                            ("degree", "order", "mesh", "k", "error", "cost", "dofs")}
+            runs.append(rec)
+        result["scenes"][name] = {
+            "reference": {"cells": ref.plan.geo.num_cells(), "dofs": ref.dofs, "k": ref.k,
+                          "estimate": sum(ref.plan.estimate.values()), "seconds": ref.seconds,
+                          "second_vs_first": ref_check["error"]},
+            "runs": runs, "uniform": uniform}
+        _write(result, out)
+        del ref, second, uniform
+        gc.collect()
+    return result
+
+
+def _write(result: dict, out: Path) -> None:
+    rows, unreached = [], []
+    for name, sc in result["scenes"].items():
+        if "failure" in sc["reference"]:
+            unreached.append((name, None, "no reference: " + sc["reference"]["failure"]))
+        for r in sc["runs"]:
+            if "out_of_reach" in r:
+                unreached.append((name, r["tolerance"], r["out_of_reach"]))
+                continue
+            b = r["uniform_best"] or {}
+            rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
+                         "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
+                         "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],
+                         "dofs": r["dofs"], "planning_seconds": r["planning_seconds"], "loop_seconds": r["loop_seconds"],
+                         "cost": r["cost"], "uniform_degree": b.get("degree"), "uniform_order": b.get("order"),
+                         "uniform_mesh": b.get("mesh"), "uniform_k": b.get("k"), "uniform_error": b.get("error"),
+                         "uniform_cost": b.get("cost"),
+                         "cost_ratio": r["cost"] / b["cost"] if b else None, "failure": r["failure"]})
+    if rows:
+        with open(out / "tolerance.csv", "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+    (out / "tolerance.json").write_text(json.dumps(result, indent=1, default=str))
+    (out / "tolerance.md").write_text(markdown(result, rows, unreached))
+
+
+def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
+    lines = ["# Tolerance runs against a fine reference (`python -m solver study tolerance`)", "",
+             "| scene | TOL | achieved error | error / TOL | estimate | chosen | cost (s) | cheapest uniform meeting TOL "
+             "| its cost (s) | cost / uniform |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        uni = (f"P{r['uniform_degree']} o{r['uniform_order']} {r['uniform_mesh']} k={r['uniform_k']:g} "
+               f"({r['uniform_error']:.2e})" if r["uniform_cost"] is not None else "none in the sweep")
+        ratio = f"{r['cost_ratio']:.2f}" if r["cost_ratio"] is not None else "—"
+        ucost = f"{r['uniform_cost']:.3f}" if r["uniform_cost"] is not None else "—"
+        lines.append(f"| {r['scene']} | {r['tolerance']:g} | {r['error']:.2e} | {r['error_over_tol']:.2f} "
+                     f"| {r['estimate']:.2e} | P{r['degree']} o{r['order']} k={r['k']:g}, {r['cells']} cells "
+                     f"| {r['cost']:.3f} | {uni} | {ucost} | {ratio} |")
+    lines += ["", "References (P2, second order, a tolerance run at "
+              f"{result['ref_tol']:g} with a 4x smaller step; its own error: a second one at 3x the tolerance, "
+              "measured against it):", "",
+              "| scene | cells | dofs | k | its estimate | second reference against it | seconds |",
+              "|---|---|---|---|---|---|---|"]
+    for name, sc in result["scenes"].items():
+        r = sc["reference"]
+        if "failure" in r:
+            continue
+        lines.append(f"| {name} | {r['cells']} | {r['dofs']} | {r['k']:g} | {r['estimate']:.2e} "
+                     f"| {r['second_vs_first']:.2e} | {r['seconds']:.1f} |")
+    n = len(rows)
+    ok = sum(r["error"] <= r["tolerance"] for r in rows)
+    tight = sum(r["error"] >= 0.2 * r["tolerance"] for r in rows)
+    within = sum(r["cost_ratio"] is not None and r["cost_ratio"] <= 2 for r in rows)
+    if unreached:
+        lines += ["", f"Refused as out of reach within {MAX_DOFS} displacement dofs (a one-line error for a user):", ""]
+        lines += [f"- {name}" + (f", TOL {tol:g}" if tol is not None else "") + f": {why}" for name, tol, why in unreached]
+    lines += ["", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. "
+              f"Cost within 2x of the cheapest uniform choice: {within} of {n}.", ""]
+    return "\n".join(lines)
+
+
+def chart(result: dict, out: Path) -> None:
+    from .charts import pyplot
+
+    plt = pyplot("tolerance.png")
+    if plt is None:
+        return
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
+    for name, sc in result["scenes"].items():
+        done = [r for r in sc["runs"] if "error" in r]
+        if not done:
+            continue
+        a.loglog([r["tolerance"] for r in done], [r["error"] for r in done], "o-", label=name)
+        pairs = [(r["uniform_best"]["cost"], r["cost"]) for r in done if r["uniform_best"]]
+        if pairs:
+            b.loglog(*zip(*pairs), "o", label=name)
+    t = np.array([min(result["tolerances"]) / 2, max(result["tolerances"]) * 2])
+    a.loglog(t, t, "k-", lw=0.8, label="error = TOL")
+    a.loglog(t, 0.2 * t, "k:", lw=0.8, label="error = 0.2 TOL")
+    a.set_xlabel("asked: TOL")
+    a.set_ylabel("achieved: error against the reference")
+    a.legend(fontsize=7)
+    lim = np.array([1e-3, 1e2])
+    b.loglog(lim, lim, "k-", lw=0.8, label="equal cost")
+    b.loglog(lim, 2 * lim, "k:", lw=0.8, label="2x")
+    b.set_xlabel("cheapest uniform (n, k, degree) meeting TOL: seconds")
+    b.set_ylabel("tolerance run: seconds (planning + loop)")
+    b.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "tolerance.png", dpi=120)
+
+
+def main(args) -> int:
+    out = Path(args.output)
+    result = run_study(args.scenes, args.tols, out, args.ref_tol, args.levels, tuple(args.steps))
+    chart(result, out)
+    print((out / "tolerance.md").read_text())
+    return 0

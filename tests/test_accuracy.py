@@ -1,0 +1,124 @@
+"""Accuracy on demand (solver/accuracy.py): what a tolerance chooses, the same on 2 ranks as on one, what it
+reports, and the refusals. Whether the achieved error meets the tolerance is measured by ``study tolerance``
+against fine references; here one small case checks it in the suite."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from conftest import run_cli as cli
+from mpi4py import MPI
+
+from solver.accuracy import contradicting, plan
+from solver.config import load
+from solver.errors import ConfigError
+
+SCENE = ROOT / "configs/example1.toml"
+SHORT = ["time.T=0.2"]  # the paper's Example 1 over 0.2 s: quick, with memory and damage
+
+
+def _plan(comm, tol, extra=()):
+    return plan(SCENE, [*SHORT, f"accuracy.tolerance={tol!r}", *extra], comm, log=lambda *a: None)
+
+
+@pytest.mark.parametrize("bad", ["nan", "0", "1", "1.5", "-1e-3", "inf", '"small"'])
+def test_bad_tolerances_are_refused(bad):
+    with pytest.raises(ConfigError) as err:
+        load(SCENE, [f"accuracy.tolerance={bad}"])
+    assert err.value.key == "accuracy.tolerance"
+
+
+def test_settings_it_chooses_contradict_it():
+    assert contradicting(["mesh.nx=8", "time.T=2", "time.k=0.1", "material.E=3"]) == ["mesh.nx=8", "time.k=0.1"]
+
+
+def test_a_tolerance_chooses_p2_second_order_and_meets_its_own_estimate(comm):
+    p = _plan(comm, 3e-3)
+    assert p.degree == 2 and p.order == 2  # P2 converges at twice P1's rate in dofs on adapted meshes
+    assert sum(p.estimate.values()) <= 3e-3
+    assert p.geo.num_cells() > 32  # adapted from the 4 x 4 start
+    tighter = _plan(comm, 1e-3)
+    assert tighter.geo.num_cells() > p.geo.num_cells() and sum(tighter.estimate.values()) <= 1e-3
+
+
+def test_parallel_plan_equals_serial(comm):
+    p = _plan(comm, 3e-3)
+    serial = _plan(MPI.COMM_SELF, 3e-3) if comm.size > 1 else p
+    assert (p.degree, p.order, p.k, p.geo.num_cells()) == (serial.degree, serial.order, serial.k,
+                                                           serial.geo.num_cells())
+    for key in p.estimate:
+        assert math.isclose(p.estimate[key], serial.estimate[key], rel_tol=1e-8, abs_tol=1e-14)
+
+
+@pytest.mark.serial
+@pytest.mark.slow
+def test_the_achieved_error_is_below_the_tolerance():
+    """Example 1 over 0.2 s at TOL 3e-3, against a P2 reference planned at 3e-4 with a 4x smaller step."""
+    from solver.tolerance_study import Reference, tolerance_run
+
+    ref = Reference(SCENE, SHORT, 3e-4, 4, log=lambda *a: None)
+    rec = tolerance_run(ref, SCENE, SHORT, 3e-3, log=lambda *a: None)
+    assert 0.2 * 3e-3 <= rec["error"] <= 3e-3, rec
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("args,key", [(["--tolerance", "0"], "tolerance"), (["--tolerance", "nan"], "tolerance"),
+                                      (["--tolerance", "2"], "tolerance"), (["--tolerance", "abc"], "--tolerance"),
+                                      (["--tolerance", "1e-2", "--set", "mesh.nx=8"], "mesh.nx=8"),
+                                      (["--tolerance", "1e-2", "--set", "time.k=0.05"], "time.k=0.05")])
+def test_bad_tolerance_on_the_command_line_is_one_line_exit_2(tmp_path, args, key):
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example1.toml", *args, "--output", str(out), "--no-progress"])
+    assert res.returncode == 2, res.stderr
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("error: ") and key in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr and not out.exists()
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_a_tolerance_run_records_what_it_chose(tmp_path, nproc):
+    from solver.post import read_csv
+
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--output", str(out),
+               "--no-progress"], nproc)
+    assert res.returncode == 0, res.stderr
+    info = json.loads((out / "plan.json").read_text())
+    cfg = load(out / "config.toml")
+    assert cfg.discretization.u_degree == info["u_degree"] and cfg.time.k == info["k"]
+    assert cfg.time.order == info["order"] and cfg.accuracy.tolerance == 1e-2
+    assert (out / "mesh.xdmf").exists()
+    rows = read_csv(out / "timeseries.csv")
+    space, tim = np.array([r["est_space"] for r in rows]), np.array([r["est_time"] for r in rows])
+    assert np.all(space + tim <= 1e-2) and np.all(space > 0)
+    assert "estimated error" in res.stderr and "for tolerance 1.000e-02" in res.stderr
+
+
+@pytest.mark.serial
+def test_a_tolerance_run_restarts_on_the_same_mesh(tmp_path):
+    """--restart plans again (the plan is deterministic), so the checkpoint fits the mesh and the last level
+    is reproduced."""
+    from solver.io import TIMING_COLUMNS
+    from solver.post import read_csv
+
+    out = tmp_path / "o"
+    args = ["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--set",
+            "output.checkpoint_every=1", "--output", str(out), "--no-progress"]
+    assert cli(args).returncode == 0
+    first = read_csv(out / "timeseries.csv")
+    res = cli([*args, "--restart"])
+    assert res.returncode == 0, res.stderr
+    again = read_csv(out / "timeseries.csv")
+    assert len(again) == len(first)
+    skip = {*TIMING_COLUMNS, "factorizations"}
+    for key in first[-1]:
+        if key not in skip:
+            assert again[-1][key] == pytest.approx(first[-1][key], rel=1e-12, abs=1e-15), key
+
+
+def test_a_tolerance_on_a_3d_scene_is_refused():
+    with pytest.raises(ConfigError) as err:
+        load(ROOT / "configs/example1_3d.toml", ["accuracy.tolerance=1e-2"])
+    assert err.value.key == "accuracy.tolerance" and "2-D" in err.value.allowed
