@@ -435,10 +435,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-readme", action="store_true", help="do not rewrite the README's generated block")
     p.add_argument("--report-only", action="store_true", help="run nothing: rewrite the fits and reports from bench.json")
     a = p.parse_args(argv)
-    for n in a.sizes:
-        if n < 1:
-            print(f"error: --sizes {n}: must be >= 1", file=sys.stderr)
-            return 2
+    bad = ([("--sizes", n, "must be >= 1") for n in a.sizes if n < 1]
+           + [("--nproc", r, "must be >= 1") for r in a.nproc if r < 1]
+           + [(opt, f"{v:g}", "must be > 0") for opt, v in (("--budget-s", a.budget_s), ("--budget-gib", a.budget_gib))
+              if not v > 0]
+           + ([("--steps", a.steps, "must be >= 1 (0: the default)")] if a.steps < 0 else []))
+    if bad:
+        opt, value, allowed = bad[0]
+        print(f"error: {opt} {value}: {allowed}", file=sys.stderr)
+        return 2
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "bench.json"

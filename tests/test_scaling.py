@@ -122,5 +122,7 @@ def test_bench_scaling_writes_its_files_merges_bench_json_and_resumes(tmp_path):
     assert cases["mumps/np1/n2"]["status"] == "ok"  # nothing smaller to predict from: measured
     assert cases["mumps/np1/n3"]["status"] == "skipped" and "budget" in cases["mumps/np1/n3"]["reason"]
     assert len(cases) == 6
-    bad = run_cli(["bench", "--scaling", "--sizes", "0", "--output", str(tmp_path)])
-    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "--sizes" in bad.stderr
+    for opt, value in (("--sizes", "0"), ("--nproc", "0"), ("--budget-s", "-1")):
+        bad = run_cli(["bench", "--scaling", opt, value, "--output", str(tmp_path)])
+        assert bad.returncode == 2 and bad.stderr.count("\n") == 1  # one line: the option, its value, what is allowed
+        assert bad.stderr.startswith(f"error: {opt} {value}") and "must be" in bad.stderr
