@@ -311,7 +311,13 @@ def _output_cases(results: dict, tmp: Path, nproc: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="solver bench", description=__doc__.splitlines()[0])
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--scaling" in argv:  # the 3-D scaling benchmark (solver/scaling.py), its own options
+        from .scaling import main as scaling_main
+
+        return scaling_main([a for a in argv if a != "--scaling"])
+    p = argparse.ArgumentParser(prog="solver bench", description=__doc__.splitlines()[0],
+                                epilog="python -m solver bench --scaling --help: the 3-D scaling benchmark")
     p.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128, 256], help="n of the size cases (none: skip them)")
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
     p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference runs")
@@ -369,6 +375,10 @@ def main(argv: list[str] | None = None) -> int:
                 results["memory_flat"].append(_spawn(128, k, 1.0, "exponential", 1))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    if (out / "bench.json").exists():  # the scaling benchmark's part (bench --scaling) is kept
+        scaling = json.loads((out / "bench.json").read_text()).get("scaling")
+        if scaling is not None:
+            results["scaling"] = scaling
     (out / "bench.json").write_text(json.dumps(results, indent=1))
     (out / "bench.md").write_text(_table(results))
     print(f"wrote {out / 'bench.json'} and {out / 'bench.md'}")

@@ -45,11 +45,13 @@ def source(eps, zeta, cfg: DamageConfig):
 
 @dataclass
 class DamageStepInfo:
-    """What one damage step did: nodes clipped, and the range before clipping."""
+    """What one damage step did: nodes clipped, the range before clipping, and the Krylov iterations of its
+    solve (``solver.linear = "iterative"``; 0 for a direct solve)."""
 
     clipped: int
     raw_min: float
     raw_max: float
+    krylov_iterations: int = 0
 
 
 class Damage:
@@ -98,6 +100,8 @@ class Damage:
         self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", petsc_options, linear, symmetric=not self.semi_implicit,
                             rtol=rtol)
         self.nlocal = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        self.iterative = linear == "iterative"
+        self._krylov = 0  # Krylov iterations of the last solve (iterative only)
         if self.cnab2:
             self.s = self.b.duplicate()  # (phi_{n-1}, xi)
             self.s_prev = self.b.duplicate()  # (phi_{n-2}, xi)
@@ -176,6 +180,7 @@ class Damage:
 
     def _solve(self) -> None:
         self.ksp.solve(self.b, self.x)
+        self._krylov = self.ksp.getIterationNumber() if self.iterative else 0
         reason = self.ksp.getConvergedReason()
         if reason < 0:
             raise DamageSolveError(str(REASONS_KSP.get(reason, reason)))
@@ -193,4 +198,4 @@ class Damage:
             lo, hi = self.cfg.zeta_star, 1.0
             clipped = comm.allreduce(int(np.count_nonzero((owned < lo) | (owned > hi))), op=MPI.SUM)
             np.clip(self.zeta.x.array, lo, hi, out=self.zeta.x.array)
-        return DamageStepInfo(clipped, raw_min, raw_max)
+        return DamageStepInfo(clipped, raw_min, raw_max, self._krylov)

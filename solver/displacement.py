@@ -23,13 +23,15 @@ from .operators import Operators, assemble_without_diagonal
 
 @dataclass
 class SolveInfo:
-    """What a method reports for one level: iterations, linear solves, factorizations, final residual."""
+    """What a method reports for one level: iterations, linear solves, factorizations, final residual, and the
+    Krylov iterations of its linear solves (``solver.linear = "iterative"``; 0 for a direct solver)."""
 
     iterations: int
     factorizations: int
     residual: float
     reason: str
     linear_solves: int = 0
+    krylov_iterations: int = 0
 
 
 class DisplacementProblem:

@@ -18,6 +18,9 @@ CSV_COLUMNS = (
     "strain_norm", "zeta_norm", "time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output",
     "wall_time",
 )
+# with solver.linear resolving to "iterative": the Krylov iterations of the level's displacement solves (summed
+# over its Newton iterations) and of its damage solve; they follow CSV_COLUMNS, before the reaction columns
+KRYLOV_COLUMNS = ("krylov_iterations", "damage_krylov_iterations")
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
 
 

@@ -16,6 +16,31 @@ from petsc4py import PETSc
 
 from .errors import ConfigError
 
+# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on.
+# Measured on 3-D Example 1, one rank (benchmarks/results/auto_3d/scaling.md): a 50-step run (the example's)
+# takes 1.2 s with MUMPS and 1.3 s iteratively at 6,591 dofs, 3.7 s and 2.6 s at 10,125, 57 s and 23 s at 59,049
+AUTO_ITERATIVE_DOFS_3D = 10_000
+
+
+def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton") -> str:
+    """The linear solver ``solver.linear = kind`` stands for on a mesh of dimension ``dim`` with ``dofs``
+    displacement dofs (global): ``kind`` itself unless it is ``auto``.
+
+    ``auto`` in 2-D: the sequential Cholesky on one process, solved redundantly on up to 4 ranks, MUMPS beyond
+    (:func:`direct_options`). In 3-D a sparse factorization fills much more: MUMPS below
+    ``AUTO_ITERATIVE_DOFS_3D`` dofs, the iterative solver from there on (Newton only: the fixed-point
+    methods re-solve one factored matrix many times).
+    """
+    if kind != "auto":
+        return kind
+    if dim == 3:
+        return "iterative" if method == "newton" and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
+    return _auto_direct(comm)
+
+
+def _auto_direct(comm: MPI.Comm) -> str:
+    return "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
+
 
 def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
     """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
@@ -28,7 +53,7 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
     one, so on a few ranks it is faster to solve redundantly and share the rest of the work.
     """
     if kind == "auto":
-        kind = "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
+        kind = _auto_direct(comm)
     if kind == "petsc" and comm.size > 1:
         kind = "redundant"
     factor = "cholesky" if symmetric else "lu"
@@ -39,24 +64,44 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
         opts = {"ksp_type": "preonly", "pc_type": "redundant", "pc_redundant_number": str(comm.size)}
         opts.update({f"redundant_{k}": v for k, v in seq.items()})
         return opts
-    return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps"}
+    # MUMPS's workspace: its estimate + 50 % (ICNTL(14), default 20 %). On 2 ranks the damage matrix of 3-D
+    # Example 1 (n = 14) failed about one factorization in 15 with INFOG(1) = -9 (workspace too small) at 20 %
+    return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps", "mat_mumps_icntl_14": "50"}
 
 
 # Krylov tolerances relative to the Newton tolerance rtol (see iterative_options)
 KSP_RTOL_FACTOR = 0.1
 
 
-def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True) -> dict[str, str]:
-    """CG (GMRES if the matrix is not symmetric) with GAMG for the displacement (``elasticity``, with the
-    rigid-body near-nullspace that :func:`rigid_body_modes` gives) or Jacobi for the damage's mass-plus-
-    diffusion matrix, whose diagonal dominates.
+# the displacement's preconditioner in 3-D Example 1 (scripts/amg_3d.py, benchmarks/results/amg_3d.md): Trilinos ML
+# (smoothed aggregation, rigid-body near-nullspace) took the least time per step from 24^3 dofs on; GAMG with plain
+# aggregation (smoothed aggregation turns indefinite under the contact penalty) where PETSc was built without ML
+SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
+AMG = {
+    "ml": {"pc_type": "ml", **SMOOTHER},
+    "gamg": {"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "0", **SMOOTHER},
+}
+# Fischer's initial guess: each solve starts from the projection of its right-hand side on the last 10 solutions
+# (reset when the matrix changes); the steps of a level sequence have slowly changing right-hand sides
+GUESS = {"ksp_guess_type": "fischer", "ksp_guess_fischer_model": "1,10"}
+
+
+def default_amg() -> str:
+    """``ml`` if this PETSc has Trilinos ML, else ``gamg``."""
+    return "ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg"
+
+
+def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg: str | None = None) -> dict[str, str]:
+    """CG (GMRES if the matrix is not symmetric) with algebraic multigrid for the displacement (``elasticity``;
+    ``amg`` = ``ml`` or ``gamg``, default :func:`default_amg`; the rigid-body near-nullspace comes from
+    :func:`rigid_body_modes`) and Fischer's initial guess, or Jacobi for the damage's mass-plus-diffusion matrix,
+    whose diagonal dominates.
 
     The Krylov tolerance is tied to the Newton tolerance ``rtol``: a linear solve stops when its true
-    (unpreconditioned) residual is below ``0.1 rtol`` times its right-hand side. The Newton residual test
-    (||F|| <= rtol * scale, evaluated with the exact F) still decides convergence; an inexact step can
-    only cost an extra Newton iteration, not accuracy. The factor 0.1 also keeps the step test
-    ||du|| <= rtol ||u|| sound: the step is exact to 10% of its own (already small) size, so u equals the
-    direct solver's to the reported accuracy. The preconditioner is set up again only when PETSc sees
+    (unpreconditioned) residual is below ``0.1 rtol`` times its right-hand side (the Newton solver also stops
+    it at ``0.1 rtol`` times the level's force scale, the Newton test's own tolerance). The Newton residual
+    test (||F|| <= rtol * scale, evaluated with the exact F) still decides convergence; an inexact step can
+    only cost an extra Newton iteration, not accuracy. The preconditioner is set up again only when PETSc sees
     the matrix modified (the Jacobian changes only with the contact active set), like a factorization.
     """
     opts = {"ksp_type": "cg" if symmetric else "gmres", "ksp_rtol": repr(KSP_RTOL_FACTOR * rtol),
@@ -64,12 +109,9 @@ def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True) -> 
     if not symmetric:
         opts["ksp_gmres_restart"] = "200"
     if elasticity:
-        # plain aggregation: with the contact penalty (1/mu ~ 1e10 on the active facets) GAMG's default
-        # smoothed prolongator made the preconditioner indefinite (CG: DIVERGED_INDEFINITE_PC at the first
-        # active set of 3-D Example 1); unsmoothed it converges (35 iterations at 8x8x8)
-        opts.update({"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "0", "pc_gamg_sym_graph": "true",
-                     "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi",
-                     "mg_levels_esteig_ksp_type": "cg"})
+        opts.update(AMG[amg or default_amg()])
+        if symmetric:  # Fischer's projection is in the energy norm of an SPD matrix
+            opts.update(GUESS)
     else:
         opts["pc_type"] = "jacobi"
     return opts
@@ -197,6 +239,8 @@ def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, s
     ksp.setFromOptions()
     if kind == "iterative":
         ksp.setInitialGuessNonzero(True)  # x holds the last solution: the previous level's field
+    if defaults.get("pc_factor_mat_solver_type") == "mumps":
+        ksp.setUp()  # MUMPS reads its mat_mumps_* options when it factors: factor while they are set
     clear_options(prefix, defaults)
     return ksp
 

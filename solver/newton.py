@@ -18,7 +18,7 @@ from petsc4py import PETSc
 from .config import SolverConfig
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
-from .linear import REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
+from .linear import KSP_RTOL_FACTOR, REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
 
 
 class NewtonSolver:
@@ -42,6 +42,9 @@ class NewtonSolver:
         # from zero (the level itself starts from u_{n-1}), and GAMG is set up again only when J changes
         defaults = linear_options(comm, settings.linear, problem.symmetric, settings.rtol, elasticity=True)
         self._project = settings.linear == "iterative"
+        # the Krylov tolerances are set per level (solve) unless the scene sets them itself
+        self._own_tolerance = not any(k.lstrip("-") in (f"{self.prefix}ksp_rtol", f"{self.prefix}ksp_atol")
+                                      for k, _ in settings.petsc_options)
         if self._project:
             self._nullspace = rigid_body_modes(problem.u.function_space)
             problem.J.setNearNullSpace(self._nullspace)
@@ -62,8 +65,17 @@ class NewtonSolver:
         snes.setConvergenceTest(self._converged)
         snes.setConvergenceHistory(reset=True)
         snes.setFromOptions()
-        clear_options(self.prefix, defaults)
+        self._defaults = defaults
+        self._clear_options()
         self.snes = snes
+        # a preconditioner reads the options of its parts (multigrid levels, coarse solver) only when it is set
+        # up, at a solve: they are put back in the database around each solve (and removed after it)
+
+    def _clear_options(self) -> None:
+        """Remove this solver's options (defaults and the scene's ``mech_`` ones) from PETSc's database."""
+        clear_options(self.prefix, self._defaults)
+        clear_options("", [k.lstrip("-") for k, _ in self.settings.petsc_options
+                           if k.lstrip("-").startswith(self.prefix)])
 
     def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
         if self._initial is not None:  # the first evaluation, at u_{n-1}: already known
@@ -102,10 +114,20 @@ class NewtonSolver:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
         problem, u = self.problem, self.problem.u
         self._scale = scale
+        if self._project and self._own_tolerance:
+            # the Krylov solve of a Newton step need not go below what the Newton test asks of F: stop at
+            # 0.1 rtol * scale (F after the step equals the Krylov residual while the active set holds), or at
+            # 0.1 rtol relative to the step's right-hand side, whichever is reached first
+            ksp = self.snes.getKSP()
+            ksp.setTolerances(rtol=KSP_RTOL_FACTOR * self.settings.rtol, atol=KSP_RTOL_FACTOR * self.settings.rtol * scale)
         problem.first_residual(self._F0)
         self._initial = self._F0
         f0 = self.factorizations
-        self.snes.solve(None, u.vector)
+        set_options(self.prefix, self._defaults, self.settings.petsc_options)
+        try:
+            self.snes.solve(None, u.vector)
+        finally:
+            self._clear_options()
         self._initial = None
         u.x.scatter_forward()
         reason = self.snes.getConvergedReason()
@@ -117,7 +139,8 @@ class NewtonSolver:
             problem.evaluate(u.vector, problem.r)
             residual = problem.r.norm()
         ksp_reason = self.snes.getKSP().getConvergedReason()
-        self.krylov_iterations += self.snes.getLinearSolveIterations()
+        krylov = self.snes.getLinearSolveIterations() if self._project else 0
+        self.krylov_iterations += krylov
         tol = self.settings.rtol * scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
         if ok and not problem.nonlinear:
@@ -127,4 +150,5 @@ class NewtonSolver:
         name = REASONS_SNES.get(reason, str(reason))
         if not ok:
             raise DisplacementSolveError("SNES", name, its, list(history), tol, linear_reason=ksp_reason)
-        return SolveInfo(max(its, 1), self.factorizations - f0, residual, name, linear_solves=max(its, 1))
+        return SolveInfo(max(its, 1), self.factorizations - f0, residual, name, linear_solves=max(its, 1),
+                         krylov_iterations=krylov)

@@ -14,6 +14,7 @@ history without memory, no contact term without a contact part.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,7 +30,8 @@ from .damage import Damage
 from .diagnostics import DamageDiagnostics
 from .errors import NonFiniteError, OutputError, SolveFailure
 from .geometry import Geometry, build
-from .io import CSV_COLUMNS, CSVWriter, on_rank0, write_text_atomic
+from .io import CSV_COLUMNS, KRYLOV_COLUMNS, CSVWriter, on_rank0, write_text_atomic
+from .linear import choose_linear
 from .material import elasticity, lame
 from .mechanics import Mechanics
 from .memory import (
@@ -58,6 +60,7 @@ class Model:
     rule: QuadratureRule
     mech: Mechanics
     u_prev: fem.Function | None = None  # u_{n-1} while level n is solved (time.order = 2: the extrapolation)
+    linear: str = "auto"  # the linear solver solver.linear resolves to on this mesh (linear.choose_linear)
 
     @property
     def comm(self) -> MPI.Comm:
@@ -73,12 +76,15 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     V = fem.VectorFunctionSpace(mesh, ("CG", disc.u_degree))
     u = fem.Function(V, name="displacement")
     k, steps = cfg.time.k, cfg.time.steps
+    dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
+    linear = choose_linear(cfg.solver.linear, comm, geo.dim, dofs, cfg.solver.method)
+    settings = dataclasses.replace(cfg.solver, linear=linear)  # cfg itself keeps the scene's value (restart's hash)
     damage = None
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
         scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
         damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        cfg.solver.linear, scheme, cfg.solver.rtol)
+                        linear, scheme, cfg.solver.rtol)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))
@@ -94,10 +100,10 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
         implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
     if history is not None and mat.model == "plane_strain":  # sigma_33 has a memory part too
         history = PlaneStrainHistory(history, make_history(cfg.memory, rule, OutOfPlaneSource(rule, source), k, steps))
-    mech = Mechanics(geo, u, mat, cfg.boundaries, cfg.solver, history, implicit_term=implicit,
+    mech = Mechanics(geo, u, mat, cfg.boundaries, settings, history, implicit_term=implicit,
                      body_force=cfg.body_force)
     u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
-    return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev)
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev, linear)
 
 
 class Stepper:
@@ -115,14 +121,14 @@ class Stepper:
         """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""
         model, t = self.model, n * self.k
         t0 = time.perf_counter()
-        clipped, raw = 0, None
+        clipped, raw, dkrylov = 0, None, 0
         try:
             if n > 0 and model.history is not None:
                 model.history.commit(n - 1)
             t1 = time.perf_counter()
             if n > 0 and model.damage is not None:
                 dinfo = model.damage.step()
-                clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+                clipped, raw, dkrylov = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max), dinfo.krylov_iterations
             if n > 0 and model.u_prev is not None:
                 self._extrapolated_memory(n)
             t2 = time.perf_counter()
@@ -131,12 +137,14 @@ class Stepper:
                 if model.damage is not None:
                     dinfo = model.damage.correct_first_step()
                     clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
+                    dkrylov += dinfo.krylov_iterations
                 if model.u_prev is not None:
                     model.history.extrapolate(None)  # H(u_1, zeta_1), both predicted
                 again = model.mech.solve(t)
                 again.iterations += info.iterations
                 again.linear_solves += info.linear_solves
                 again.factorizations += info.factorizations
+                again.krylov_iterations += info.krylov_iterations
                 info = again
             self._check_finite()
         except SolveFailure as exc:
@@ -147,6 +155,7 @@ class Stepper:
         row = {
             "step": n, "t": t, "newton_iterations": info.iterations, "linear_solves": info.linear_solves,
             "factorizations": info.factorizations, "residual": info.residual,
+            "krylov_iterations": info.krylov_iterations, "damage_krylov_iterations": dkrylov,
             **model.mech.diagnostics.row(),
             "zeta_min": zmin, "zeta_max": zmax, "zeta_raw_min": raw[0], "zeta_raw_max": raw[1], "zeta_clipped": clipped,
             "zeta_norm": self.damage_diagnostics.zeta_norm(),
@@ -210,7 +219,8 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
     levels = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
     out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, levels, keep_until)
-    columns = CSV_COLUMNS + model.mech.diagnostics.columns + tuple(c for s in sensors for c in s.columns)
+    columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+               + tuple(c for s in sensors for c in s.columns))
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     stepper = Stepper(model)

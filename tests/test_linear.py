@@ -66,10 +66,13 @@ def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
 
 
 def test_iterative_options_tie_the_krylov_tolerance_to_newton():
-    from solver.linear import iterative_options, linear_options
+    from solver.linear import default_amg, iterative_options, linear_options
 
     opts = iterative_options(1e-10, elasticity=True)
-    assert opts["ksp_type"] == "cg" and opts["pc_type"] == "gamg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
+    assert opts["ksp_type"] == "cg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
+    assert opts["pc_type"] == default_amg() == ("ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg")
+    assert opts["ksp_guess_type"] == "fischer" and "ksp_guess_type" not in iterative_options(1e-10, True, False)
+    assert iterative_options(1e-10, True, amg="gamg")["pc_gamg_agg_nsmooths"] == "0"  # plain aggregation
     assert opts["ksp_norm_type"] == "unpreconditioned" and float(opts["ksp_atol"]) == 0.0
     assert iterative_options(1e-8, elasticity=False, symmetric=False)["ksp_type"] == "gmres"
     assert linear_options(MPI.COMM_WORLD, "iterative", True, 1e-8, elasticity=False)["pc_type"] == "jacobi"
@@ -146,3 +149,95 @@ def test_gamg_is_set_up_again_only_when_the_active_set_changes(comm):
     long, f_long = setups(1.0)
     assert f_long[0] > 0 and not any(f_long[1:]) and f_short == f_long[:4]  # J changes at level 0 only
     assert short == long > 0
+
+
+class _Size:
+    """A stand-in communicator: choose_linear reads only its size."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+
+
+def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_in_3d():
+    from solver.linear import AUTO_ITERATIVE_DOFS_3D, choose_linear
+
+    big = 10 * AUTO_ITERATIVE_DOFS_3D
+    for size, expected in ((1, "petsc"), (2, "redundant"), (4, "redundant"), (5, "mumps")):
+        assert choose_linear("auto", _Size(size), 2, big) == expected  # 2-D: as before, whatever the size
+        assert direct_options(_Size(size), "auto") == direct_options(_Size(size), expected)
+    for size in (1, 2, 8):
+        assert choose_linear("auto", _Size(size), 3, AUTO_ITERATIVE_DOFS_3D - 1) == "mumps"
+        assert choose_linear("auto", _Size(size), 3, AUTO_ITERATIVE_DOFS_3D) == "iterative"
+        assert choose_linear("auto", _Size(size), 3, big, method="fixed_point") == "mumps"  # re-solves one factor
+    for kind in ("petsc", "mumps", "redundant", "iterative"):  # a named solver is never replaced
+        assert choose_linear(kind, _Size(1), 3, 10) == choose_linear(kind, _Size(1), 2, big) == kind
+
+
+def _small_3d(linear: str, extra: tuple[str, ...] = ()):
+    from conftest import ROOT
+
+    from solver.config import load
+
+    return load(ROOT / "configs/example1_3d.toml", ["mesh.nx=3", "mesh.ny=3", "mesh.nz=3", "time.k=0.1", "time.T=0.3",
+                                                     f"solver.linear='{linear}'", *extra])
+
+
+def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypatch):
+    import solver.linear
+    from solver.stepper import build_model
+
+    assert build_model(_small_3d("auto"), comm).linear == "mumps"  # 192 dofs
+    monkeypatch.setattr(solver.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
+    cfg = _small_3d("auto")
+    model = build_model(cfg, comm)
+    assert model.linear == "iterative" and model.mech.solver._project and model.damage.iterative
+    assert cfg.solver.linear == "auto"  # config.toml and the checkpoint's scene hash see the scene's own value
+
+
+@pytest.mark.parametrize("linear", ["iterative", "mumps"])
+def test_krylov_columns_only_with_the_iterative_solver(comm, shared_tmp, linear):
+    from solver.io import CSV_COLUMNS, KRYLOV_COLUMNS
+    from solver.post import read_csv
+    from solver.stepper import build_model, run
+
+    out = shared_tmp / linear
+    if comm.rank == 0:
+        out.mkdir()
+    comm.barrier()
+    rows = run(build_model(_small_3d(linear, ("output.xdmf=false",)), comm), out)
+    header = (out / "timeseries.csv").read_text().splitlines()[0].split(",")
+    csv = read_csv(out / "timeseries.csv")
+    if linear == "iterative":
+        assert header[len(CSV_COLUMNS):len(CSV_COLUMNS) + 2] == list(KRYLOV_COLUMNS)  # before the reactions
+        assert all(r["krylov_iterations"] >= r["newton_iterations"] for r in csv)  # >= 1 per linear solve
+        assert csv[0]["damage_krylov_iterations"] == 0 and all(r["damage_krylov_iterations"] > 0 for r in csv[1:])
+        assert [r["krylov_iterations"] for r in csv] == [r["krylov_iterations"] for r in rows]
+    else:
+        assert not set(KRYLOV_COLUMNS) & set(header)
+        assert all(r["krylov_iterations"] == 0 for r in rows)
+
+
+def test_multigrid_level_options_reach_the_preconditioner(comm):
+    """Options of the multigrid levels are read when the preconditioner is set up (at the first solve): the
+    defaults and the scene's own must still be there then."""
+    from solver.stepper import Stepper, build_model
+
+    model = build_model(_small_3d("iterative", ("solver.petsc_options.mech_pc_type='gamg'",
+                                                "solver.petsc_options.mech_mg_levels_ksp_max_it=3")), comm)
+    Stepper(model).step(0)
+    pc = model.mech.solver.snes.getKSP().getPC()
+    assert pc.getType() == "gamg"
+    smoother = pc.getMGSmoother(pc.getMGLevels() - 1)
+    assert smoother.getType() == "chebyshev" and smoother.getTolerances()[3] == 3  # default type, scene's max_it
+    assert not PETSc.Options().hasName("mech_mg_levels_ksp_max_it")  # and they are gone after the solve
+
+
+def test_mumps_reads_its_workspace_option_in_both_solvers(comm):
+    """MUMPS reads mat_mumps_* when it factors (after the options were written and cleared): the damage KSP
+    is factored while they are set, the displacement SNES's around each solve."""
+    from solver.stepper import Stepper, build_model
+
+    model = build_model(_small_3d("mumps"), comm)
+    Stepper(model).step(0)
+    for ksp in (model.damage.ksp, model.mech.solver.snes.getKSP()):
+        assert ksp.getPC().getFactorMatrix().getMumpsIcntl(14) == 50

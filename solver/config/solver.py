@@ -18,7 +18,12 @@ _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature
 class SolverConfig:
     """Solver settings: the displacement method (newton | penalty_duality | fixed_point) with its
     tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
-    damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees."""
+    damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees.
+
+    ``linear = "auto"`` is resolved on the mesh (linear.choose_linear): in 2-D PETSc's sequential Cholesky on one
+    process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below linear.AUTO_ITERATIVE_DOFS_3D = 10,000
+    displacement dofs and the iterative solver from there (the crossover of a 50-step 3-D Example 1 run,
+    benchmarks/results/auto_3d/scaling.md)."""
 
     rtol: float = 1e-10
     max_it: int = 25
