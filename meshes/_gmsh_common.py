@@ -47,8 +47,9 @@ def add_groups(groups: dict[str, list[int]], surface: int) -> None:
 
 
 def main(name: str, build: Callable[[float], None], default_h: float, description: str,
-         argv: list[str] | None = None) -> None:
-    """Parse --h/--output, mesh with the fixed options and write ``<name>.msh``."""
+         argv: list[str] | None = None, dim: int = 2) -> None:
+    """Parse --h/--output, mesh with the fixed options (triangles, or tetrahedra with ``dim = 3``) and write
+    ``<name>.msh``."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--h", type=float, default=default_h, help=f"target mesh size (default {default_h})")
     parser.add_argument("--output", type=Path, default=Path(__file__).resolve().parent / f"{name}.msh",
@@ -62,11 +63,11 @@ def main(name: str, build: Callable[[float], None], default_h: float, descriptio
             _set_option(option, value)
         gmsh.model.add(name)
         build(args.h)
-        gmsh.model.mesh.generate(2)
+        gmsh.model.mesh.generate(dim)
         args.output.parent.mkdir(parents=True, exist_ok=True)
         gmsh.write(str(args.output))
-        ntri = len(gmsh.model.mesh.getElementsByType(2)[0])
+        cells = len(gmsh.model.mesh.getElementsByType(2 if dim == 2 else 4)[0])
         nodes = len(gmsh.model.mesh.getNodes()[0])
-        print(f"wrote {args.output}: {ntri} triangles, {nodes} nodes (h = {args.h})")
+        print(f"wrote {args.output}: {cells} {'triangles' if dim == 2 else 'tetrahedra'}, {nodes} nodes (h = {args.h})")
     finally:
         gmsh.finalize()

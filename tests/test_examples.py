@@ -138,3 +138,19 @@ def test_foundation_scene_balances_and_spreads(comm):
     # plane strain: (A eps)_33 = lambda tr eps = nu ((A eps)_11 + (A eps)_22)
     assert np.allclose(zz_el, cfg.material.nu * (elastic[:, 0, 0] + elastic[:, 1, 1]), rtol=1e-12, atol=1e-12)
     assert comm.allreduce(float(np.abs(zz_el).max(initial=0.0)), op=MPI.MAX) > 0 and np.all(np.isfinite(zz))
+
+
+def test_the_gmsh_3d_column_runs_the_same_on_any_ranks_and_solver(comm):
+    """configs/column3d.toml (a gmsh cylinder with named faces, meshes/column3d.py) over 0.2 s: 2 ranks = 1 process,
+    and the iterative solver = the direct one, to 1e-7 relative in the contact force and the strain norm."""
+
+    def last(c, linear):
+        cfg = load(ROOT / "configs/column3d.toml", ["time.T=0.2", "output.xdmf=false", f"solver.linear={linear}"])
+        return solve(cfg, c)[1][-1]
+
+    here, alone = last(comm, "auto"), last(MPI.COMM_SELF, "auto")
+    iterative = last(comm, "iterative")
+    for key in ("contact_force", "strain_norm", "zeta_min"):
+        assert here[key] == pytest.approx(alone[key], rel=1e-7)
+        assert iterative[key] == pytest.approx(here[key], rel=1e-7)
+    assert here["contact_force"] > 0
