@@ -127,6 +127,12 @@ def _order(path: Path, overrides: list[str]) -> int:
         return 1
 
 
+def _dofs(model) -> int:
+    """Displacement dofs over all ranks."""
+    dofmap = model.u.function_space.dofmap
+    return dofmap.index_map.size_global * dofmap.index_map_bs
+
+
 def _elastic(cfg):
     """The scene without memory and damage: its level 0 (the elastic contact problem) is the same."""
     from .config import from_dict, to_dict
@@ -151,7 +157,7 @@ class _Level0:
         est = estimator_for(self.model)
         self.eta2 = est.cells()
         self.eta = est.total(self.eta2)
-        self.dofs = self.model.u.function_space.dofmap.index_map.size_global * self.model.u.function_space.dofmap.index_map_bs
+        self.dofs = _dofs(self.model)
 
 
 class _Worst:
@@ -183,8 +189,7 @@ class _Worst:
                 if halving == 3:
                     raise
         self.eta, self.eta2 = worst
-        imap = model.u.function_space.dofmap.index_map
-        self.dofs = imap.size_global * model.u.function_space.dofmap.index_map_bs
+        self.dofs = _dofs(model)
 
 
 def _theta(theta: float, ratio: float) -> float:

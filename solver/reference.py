@@ -21,46 +21,9 @@ import numpy as np
 import scipy.sparse as sp
 
 
-def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
-    """Rows: points; columns: the nodes of V (a Lagrange space on affine triangles, this process; for a vector
-    space the matrix acts on each component: P @ u.reshape(-1, bs)).
-
-    Each point is located in a cell of V's mesh (bounding-box tree), mapped to the reference
-    triangle, and V's element basis is tabulated there.
-    """
-    import basix
-    from dolfinx import geometry
-
-    mesh = V.mesh
-    tdim = mesh.topology.dim
-    pts = np.zeros((len(points), 3))
-    pts[:, : points.shape[1]] = points
-    tree = geometry.BoundingBoxTree(mesh, tdim)
-    colliding = geometry.compute_colliding_cells(mesh, geometry.compute_collisions(tree, pts), pts)
-    offsets = colliding.offsets
-    if np.any(np.diff(offsets) == 0):
-        raise ValueError("a point of the reference lies outside the run's mesh")
-    cells = colliding.array[offsets[:-1]]
-    gdofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[cells]
-    X = mesh.geometry.x[gdofs][:, :, :2]  # (point, vertex, xy)
-    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)  # columns: edges
-    ref = np.linalg.solve(J, (pts[:, :2] - X[:, 0])[:, :, None])[:, :, 0]
-    degree = V.ufl_element().degree()
-    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree,
-                                   basix.LagrangeVariant.gll_warped)
-    phi = element.tabulate(0, ref)[0, :, :, 0]  # (point, local dof)
-    ndofs = phi.shape[1]
-    cols = V.dofmap.list.array.reshape(-1, ndofs)[cells]
-    rows = np.repeat(np.arange(len(pts)), ndofs)
-    size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
-    P = sp.csr_matrix((phi.ravel(), (rows, cols.ravel())), shape=(len(pts), size))
-    P.eliminate_zeros()
-    return P
-
-
 def _locate(mesh, points: np.ndarray):
-    """The cell holding each point (2-D affine triangles), its vertices' coordinates and the point's reference
-    coordinates; raises if a point lies outside."""
+    """The cell holding each point (2-D affine triangles), the cell's Jacobian (columns: edges) and the point's
+    reference coordinates; raises ValueError if a point lies outside this process's cells."""
     from dolfinx import geometry
 
     tdim = mesh.topology.dim
@@ -73,29 +36,48 @@ def _locate(mesh, points: np.ndarray):
         raise ValueError("a point lies outside the mesh")
     cells = colliding.array[offsets[:-1]]
     gdofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[cells]
-    X = mesh.geometry.x[gdofs][:, :, :2]
+    X = mesh.geometry.x[gdofs][:, :, :2]  # (point, vertex, xy)
     J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
     ref = np.linalg.solve(J, (pts[:, :2] - X[:, 0])[:, :, None])[:, :, 0]
     return cells, J, ref
 
 
-def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """(Dx, Dy): rows: points; columns: the nodes of V (a Lagrange space on affine triangles); Dx @ u gives
-    du/dx at the points (componentwise for a vector space, as :func:`interpolation_matrix`)."""
+def _tabulated(V, points: np.ndarray, derivatives: int):
+    """V's element basis (and its reference derivatives up to ``derivatives``) at located points, with what a
+    sparse matrix over V's local nodes needs: (cells' Jacobians, table (deriv, point, local dof), rows, cols,
+    number of columns)."""
     import basix
 
-    mesh = V.mesh
-    cells, J, ref = _locate(mesh, points)
-    degree = V.ufl_element().degree()
-    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree,
+    cells, J, ref = _locate(V.mesh, points)
+    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, V.ufl_element().degree(),
                                    basix.LagrangeVariant.gll_warped)
-    tab = element.tabulate(1, ref)[1:, :, :, 0]  # (d/dX, d/dY) x point x local dof
-    Jinv_T = np.transpose(np.linalg.inv(J), (0, 2, 1))  # grad_x = J^{-T} grad_X
-    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab)  # (x/y, point, local dof)
+    tab = element.tabulate(derivatives, ref)[:, :, :, 0]
     ndofs = tab.shape[2]
     cols = V.dofmap.list.array.reshape(-1, ndofs)[cells].ravel()
     rows = np.repeat(np.arange(len(points)), ndofs)
     size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    return J, tab, rows, cols, size
+
+
+def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
+    """Rows: points; columns: the nodes of V (a Lagrange space on affine triangles, this process; for a vector
+    space the matrix acts on each component: P @ u.reshape(-1, bs)).
+
+    Each point is located in a cell of V's mesh (bounding-box tree), mapped to the reference
+    triangle, and V's element basis is tabulated there.
+    """
+    _, tab, rows, cols, size = _tabulated(V, points, 0)
+    P = sp.csr_matrix((tab[0].ravel(), (rows, cols)), shape=(len(points), size))
+    P.eliminate_zeros()
+    return P
+
+
+def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(Dx, Dy): rows: points; columns: the nodes of V (a Lagrange space on affine triangles); Dx @ u gives
+    du/dx at the points (componentwise for a vector space, as :func:`interpolation_matrix`)."""
+    J, tab, rows, cols, size = _tabulated(V, points, 1)
+    Jinv_T = np.transpose(np.linalg.inv(J), (0, 2, 1))  # grad_x = J^{-T} grad_X
+    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab[1:])  # (x/y, point, local dof)
     return tuple(sp.csr_matrix((grads[i].ravel(), (rows, cols)), shape=(len(points), size)) for i in range(2))
 
 
