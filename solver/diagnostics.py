@@ -1,10 +1,14 @@
 """Per-level diagnostics of the displacement: contact force and zone, penetration, ||eps(u)||, reactions.
 
 Functionals of the contact term are integrated with the same facet rule as the term
-itself; ||eps(u)||_L2 = sqrt(u . G u) with the strain Gram matrix G assembled once.
+itself; ||eps(u)||_L2 from the strain at the memory points where the scene has memory (that
+strain is the next commit's, so the norm is one pass over the points), else sqrt(u . G u) with
+the strain Gram matrix G assembled once.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 import ufl
@@ -72,16 +76,20 @@ class DisplacementDiagnostics:
     """What the time series reports about u at each level (all values the same on every rank)."""
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
-                 points: ContactPoints | None, reactions: Reactions | None = None) -> None:
+                 points: ContactPoints | None, reactions: Reactions | None = None,
+                 strain_norm: Callable[[], float] | None = None) -> None:
         self.geo, self.u, self.points, self.reactions = geo, u, points, reactions
+        self._point_norm = strain_norm  # ||eps(u)|| at the memory points (memory.PointStrainNorm), if exact there
         self.has_contact = bool(parts)
         self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
         self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
-        V = u.function_space
-        du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-        self.gram = fpetsc.assemble_matrix(fem.form(ufl.inner(strain(du), strain(w)) * ufl.dx))
-        self.gram.assemble()
-        self._work = self.gram.createVecLeft()
+        self.gram = None
+        if strain_norm is None:
+            V = u.function_space
+            du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+            self.gram = fpetsc.assemble_matrix(fem.form(ufl.inner(strain(du), strain(w)) * ufl.dx))
+            self.gram.assemble()
+            self._work = self.gram.createVecLeft()
 
     def _integral(self, form) -> float:
         return 0.0 if form is None else self.geo.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
@@ -101,7 +109,9 @@ class DisplacementDiagnostics:
         return float("nan") if self.has_contact else 0.0
 
     def strain_norm(self) -> float:
-        """||eps(u)||_L2 = sqrt(u . G u)."""
+        """||eps(u)||_L2: at the memory points where given, else sqrt(u . G u)."""
+        if self._point_norm is not None:
+            return self._point_norm()
         self.gram.mult(self.u.vector, self._work)
         return float(np.sqrt(max(self._work.dot(self.u.vector), 0.0)))
 

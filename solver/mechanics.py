@@ -27,7 +27,7 @@ from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .fixed_point import FixedPointSolver, PenaltyDualitySolver
 from .geometry import Geometry
-from .memory import History
+from .memory import History, PointStrainNorm
 from .newton import NewtonSolver
 from .operators import Dirichlet, Operators, check_rigid_motions
 
@@ -63,7 +63,8 @@ class Mechanics:
             self.solver = FixedPointSolver(self.problem, points, settings, geo.comm)
         else:
             self.solver = PenaltyDualitySolver(self.problem, points, settings, geo.comm, geo, parts)
-        self.diagnostics = DisplacementDiagnostics(geo, u, parts, deg, points, Reactions(self.problem))
+        self.diagnostics = DisplacementDiagnostics(geo, u, parts, deg, points, Reactions(self.problem),
+                                                   _point_strain_norm(self.ops, history, u))
 
     def solve(self, t: float) -> SolveInfo:
         """Solve for u at time t (u holds the previous level as initial guess)."""
@@ -86,3 +87,12 @@ class Mechanics:
         """Continue exactly where a checkpointed run was (the Jacobian is rebuilt at the first solve)."""
         self.problem.contact_norm = float(scalars["c_norm"])
         self.problem.carried = bool(scalars["reuse"])
+
+
+def _point_strain_norm(ops: Operators, history: History | None, u: fem.Function) -> PointStrainNorm | None:
+    """||eps(u)|| from the memory source's strain at its points, where its rule integrates eps : eps exactly
+    (degree >= 2 (p - 1)); None (the Gram matrix) otherwise."""
+    operator = ops.memory_operator
+    if operator is None or history.rule.degree < 2 * (u.function_space.ufl_element().degree() - 1):
+        return None
+    return PointStrainNorm(history.H, operator.weights)

@@ -198,6 +198,11 @@ class Operators:
         self._lift = self.b.duplicate()
 
     @property
+    def memory_operator(self) -> MemoryForce | None:
+        """The operator that forms B M from the source's strain operator (None where B is assembled)."""
+        return self._memory_force
+
+    @property
     def memory_force(self) -> PETSc.Vec | None:
         """B M_n of the last :meth:`assemble_rhs` (None without memory)."""
         return self._work if self.history is not None else None

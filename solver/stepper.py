@@ -24,7 +24,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import checkpoint
+from . import checkpoint, formcache
 from .config import Config, dumps
 from .damage import Damage
 from .diagnostics import DamageDiagnostics
@@ -45,6 +45,8 @@ from .memory import (
     trapezoid_term,
 )
 from .outputs import Outputs
+
+formcache.install()  # models are built many times per process (studies, tolerance runs): compiled forms kept
 
 
 @dataclass

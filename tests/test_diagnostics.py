@@ -1,4 +1,5 @@
-"""Per-level diagnostics: the strain norm from the Gram matrix, damage norms, contact functionals."""
+"""Per-level diagnostics: the strain norm (at the memory points or from the Gram matrix), damage norms, contact
+functionals."""
 
 import numpy as np
 import pytest
@@ -10,8 +11,17 @@ from solver.config import from_dict
 from solver.stepper import Stepper, build_model
 
 
-def test_strain_norm_and_zeta_norm_equal_their_integrals(comm):
-    model = build_model(from_dict({"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.2, "k": 0.1}}), comm)
+@pytest.mark.parametrize("scene", [
+    {},  # P1: the norm at the memory points (one per cell)
+    {"discretization": {"u_degree": 2}},  # P2: at the degree-3 memory rule's six points
+    {"discretization": {"u_degree": 2}, "solver": {"quadrature_degree": 1}},  # a rule too low for eps:eps: the Gram matrix
+    {"discretization": {"u_degree": 2}, "time": {"order": 2}},  # the extrapolated history keeps two strains
+    {"memory": {"kernel": "none"}},  # no memory: the Gram matrix
+], ids=["P1", "P2", "P2-low-rule", "P2-order2", "no-memory"])
+def test_strain_norm_and_zeta_norm_equal_their_integrals(comm, scene):
+    model = build_model(from_dict({"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.2, "k": 0.1}, **scene}), comm)
+    point_norm = model.mech.diagnostics._point_norm is not None
+    assert point_norm == ("memory" not in scene and "solver" not in scene)
     stepper = Stepper(model)
     for n in range(3):
         row = stepper.step(n)

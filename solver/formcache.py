@@ -1,0 +1,44 @@
+"""An in-process memo in front of FFCx's disk cache of compiled forms.
+
+Every ``fem.form`` of dolfinx 0.5.2 asks FFCx for its compiled module. FFCx finds it in its
+disk cache (``~/.cache/fenics``) through an ``importlib`` finder whose directory cache it
+invalidates each time, so every form of every model build lists the whole cache directory:
+about 1 ms per form with 2,000 cached files, 20 of a 50-ms model build on a small mesh, and
+more as the cache grows. A model built many times in one process (the pilot runs and adapted
+meshes of a tolerance run, the studies, the tests) asks for the same modules again. This memo
+keeps each module found in the disk cache for the process, keyed by everything FFCx's own
+lookup is keyed by (the module's name, which is the forms' signature and the compiler
+parameters, the object names and the cache directory). A module FFCx has not compiled yet
+goes the usual way; once compiled and found on disk, it is kept too.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import ffcx.codegeneration.jit as ffcx_jit
+
+_disk_lookup = ffcx_jit.get_cached_module
+_found: dict[tuple, tuple] = {}
+
+
+def _lookup(module_name: str, object_names: list[str], cache_dir: Path | str, timeout: int):
+    """FFCx's ``get_cached_module``, answered from memory for a module already found in this process."""
+    key = (module_name, tuple(object_names), str(cache_dir))
+    hit = _found.get(key)
+    if hit is not None:
+        return hit
+    objects, module = _disk_lookup(module_name, object_names, cache_dir, timeout)
+    if objects is not None:  # found on disk (None: not compiled yet; FFCx compiles it now)
+        _found[key] = (objects, module)
+    return objects, module
+
+
+def install() -> None:
+    """Put the memo in front of FFCx's lookup (once per process; idempotent)."""
+    ffcx_jit.get_cached_module = _lookup
+
+
+def kept() -> int:
+    """How many modules the memo holds (for tests)."""
+    return len(_found)
