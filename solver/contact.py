@@ -36,19 +36,6 @@ def compliance(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Exp
     return normal_compliance(r, part.mu) + ufl.max_value(r - part.depth, 0.0) / part.mu_stiff
 
 
-def potential(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Expr:
-    """P(r) with P' = p (the part's law): the contact energy density, so j(u, w) is the derivative of
-    int P(u_nu - g) ds. Convex, as p is nondecreasing."""
-    def sq(s, m):
-        return ufl.max_value(s, 0.0) ** 2 / (2.0 * m)
-
-    if part.law == "linear":
-        return sq(r, part.mu)
-    if part.law == "power":
-        return part.coefficient * ufl.max_value(r, 0.0) ** (part.exponent + 1.0) / (part.exponent + 1.0)
-    return sq(r, part.mu) + sq(r - part.depth, part.mu_stiff)
-
-
 def penetration(u, n, gap):
     """u_nu - g (> 0 is interpenetration)."""
     return ufl.dot(u, n) - gap
@@ -129,24 +116,6 @@ class ContactTerm:
         self._probe.setRandom(PETSc.Random().create(comm=geo.comm))
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
-        self._energy_parts = (geo, u, parts, degree)
-        self._energy: tuple | None = None  # (form, the other state), compiled at the first use
-
-    def energy_change(self, x: PETSc.Vec, y: PETSc.Vec) -> float:
-        """int P(r(y)) - P(r(x)) ds over the contact parts (collective; u ends holding y). One form of the
-        difference, so that two large penalty energies are not subtracted after the integration."""
-        geo, u, parts, degree = self._energy_parts
-        if self._energy is None:
-            v = fem.Function(u.function_space)
-            n = ufl.FacetNormal(geo.mesh)
-            dE = sum((potential(penetration(u, n, gap_function(p, geo.mesh)), p)
-                      - potential(penetration(v, n, gap_function(p, geo.mesh)), p)) * _ds(geo, p, degree) for p in parts)
-            self._energy = (fem.form(dE), v)
-        form, v = self._energy
-        for vec, f in ((x, v), (y, u)):
-            vec.copy(f.vector)
-            f.x.scatter_forward()
-        return self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
 
     def add_residual(self, F: PETSc.Vec) -> float:
         """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""

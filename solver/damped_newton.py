@@ -1,4 +1,4 @@
-"""Newton with a backtracking line search on the energy: the fallback for a level plain Newton did not solve
+"""Newton with an exact line search on the energy: the fallback for a level plain Newton did not solve
 (docs/model.md §3.3).
 
 Without the implicit memory term, F(u) = 0 of a level is the minimum of the convex energy
@@ -6,11 +6,11 @@ Without the implicit memory term, F(u) = 0 of a level is the minimum of the conv
     E(u) = 1/2 u.K u - b.u + int P(u_nu - g) ds,      P' = p (the compliance law),
 
 over the displacements with the level's Dirichlet values. The semismooth Newton step d = -J^{-1} F is a
-descent direction of E (J = K + C is symmetric positive definite), so backtracking until E decreases by a
-fraction of the slope F.d (Armijo) converges from any start; plain Newton can instead cycle between active
-sets when 1/mu is large and the contact facets small. A full step whose end has the same active set as its
-start lies on one quadratic piece of E and minimizes E along d exactly: it is taken without the energy test
-(near the solution that test is lost in round-off: E's parts are O(1/mu) larger than its decrease).
+descent direction of E (J = K + C is symmetric positive definite), and E is minimized along it: the root of
+phi'(lam) = F(x + lam d).d, nondecreasing in lam, so only residuals are evaluated (E itself would be lost in
+round-off: its parts are O(1/mu) larger than its decrease). Plain Newton can instead cycle between active
+sets when 1/mu is large and the contact facets small; descent on a convex energy cannot. A full step whose
+end has the same active set as its start lies on one quadratic piece of E and is exact: it is taken as is.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from petsc4py import PETSc
 
 from .displacement import DisplacementProblem
 
-ARMIJO = 1e-4  # the fraction of the slope the energy must decrease by
-MIN_STEP = 2.0**-30  # below this step length the line search gives up
+LINE_RTOL = 1e-2  # the line search stops where |phi'| has dropped to this fraction of phi'(0)
+LINE_ITERATIONS = 30
 
 
 @dataclass
@@ -49,18 +49,52 @@ def damped_newton(problem: DisplacementProblem, ksp: PETSc.KSP, start: PETSc.Vec
     put the Dirichlet values on every iterate (an iterative linear solver leaves them off by its error).
     Collective. Only for problems with an energy: contact without the implicit memory term."""
     x = start.copy()  # the iterate; u itself is overwritten by every evaluation at a trial point
-    F, d, y, Kx, Kd = (x.duplicate() for _ in range(5))
+    F, d, y = (x.duplicate() for _ in range(3))
     try:
-        return _iterate(problem, ksp, x, max_it, converged, project, F, d, y, Kx, Kd)
+        return _iterate(problem, ksp, x, max_it, converged, project, F, d, y)
     finally:
         x.copy(start)
-        for v in (x, F, d, y, Kx, Kd):
+        for v in (x, F, d, y):
             v.destroy()
 
 
-def _iterate(problem, ksp, x, max_it, converged, project, F, d, y, Kx, Kd) -> DampedResult:
+def _line_minimum(problem, x, d, y, F, slope: float, project: bool) -> float:
+    """The step length in (0, 1] that minimizes E(x + lam d): the root of phi'(lam) = F(x + lam d).d, which is
+    nondecreasing (E is convex) and piecewise smooth; found by the Illinois variant of regula falsi. Uses y
+    and F as work vectors."""
+    def dphi(lam: float) -> float:
+        y.waxpy(lam, d, x)
+        if project:
+            fpetsc.set_bc(y, problem.bcs)
+        problem.evaluate(y, F)
+        return F.dot(d)
+
+    lo, flo, hi = 0.0, slope, 1.0
+    fhi = dphi(hi)
+    if fhi <= 0.0:  # E decreases all the way: the full step
+        return 1.0
+    side = 0
+    for _ in range(LINE_ITERATIONS):
+        lam = (lo * fhi - hi * flo) / (fhi - flo)
+        f = dphi(lam)
+        if abs(f) <= LINE_RTOL * abs(slope):
+            return lam
+        if f < 0.0:
+            lo, flo = lam, f
+            if side == -1:
+                fhi *= 0.5
+            side = -1
+        else:
+            hi, fhi = lam, f
+            if side == 1:
+                flo *= 0.5
+            side = 1
+    return lo if lo > 0.0 else lam
+
+
+def _iterate(problem, ksp, x, max_it, converged, project, F, d, y) -> DampedResult:
     R = PETSc.SNES.ConvergedReason
-    contact, K, b, bcs = problem.contact, problem.ops.K, problem.ops.b, problem.bcs
+    contact, bcs = problem.contact, problem.bcs
     fpetsc.set_bc(x, bcs)  # the level's Dirichlet values: from here on every step keeps them (d = 0 there)
     contact.forget()
     problem.evaluate(x, F)
@@ -81,28 +115,20 @@ def _iterate(problem, ksp, x, max_it, converged, project, F, d, y, Kx, Kd) -> Da
         if out.linear_reason < 0:
             out.reason = R.DIVERGED_LINEAR_SOLVE
             return out
-        slope = F.dot(d)  # = dE/dlambda at 0, < 0 for a descent direction
-        K.mult(x, Kx)
-        K.mult(d, Kd)
-        g1, q = d.dot(Kx) - d.dot(b), d.dot(Kd)
+        slope = F.dot(d)  # phi'(0) for phi(lam) = E(x + lam d); < 0 for a descent direction
+        y.waxpy(1.0, d, x)
+        if project:
+            fpetsc.set_bc(y, bcs)
         lam = 1.0
-        while True:
+        changed = problem.update_jacobian(y)  # J at the full step (kept if the full step is taken)
+        stale = stale or changed
+        if changed and slope < 0.0:  # the active set changes along d: minimize E on the line
+            lam = _line_minimum(problem, x, d, y, F, slope, project)
+            if lam < 1.0:
+                contact.forget()  # J was assembled at the full step: rebuild it at the new iterate
             y.waxpy(lam, d, x)
             if project:
                 fpetsc.set_bc(y, bcs)
-            changed = problem.update_jacobian(y)  # J at y, needed there if y is taken
-            stale = stale or changed
-            if not changed or slope >= 0.0:  # one quadratic piece (or round-off): the full step is exact
-                break
-            dE = lam * g1 + 0.5 * lam * lam * q + contact.energy_change(x, y)
-            if dE <= ARMIJO * lam * slope:
-                break
-            contact.forget()  # J now belongs to a rejected point: rebuild it at the next iterate
-            lam *= 0.5
-            if lam < MIN_STEP:
-                problem.evaluate(x, F)  # leave x and the carried residual consistent
-                out.reason = R.DIVERGED_LINE_SEARCH
-                return out
         y.copy(x)
         snorm = lam * d.norm()
         problem.evaluate(x, F)

@@ -21,7 +21,7 @@ from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .linear import KSP_RTOL_FACTOR, REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
 
-FALLBACK_IT_FACTOR = 4  # the damped fallback's iterations, in units of solver.max_it
+FALLBACK_IT_FACTOR = 8  # the damped fallback's iterations, in units of solver.max_it
 
 
 class NewtonSolver:
@@ -117,7 +117,7 @@ class NewtonSolver:
         return R.ITERATING
 
     def _fallback(self, history: list[float], its: int) -> tuple[int, list[float], int]:
-        """Plain Newton failed: solve the level again from its start by Newton damped on the energy
+        """Plain Newton failed: solve the level again from its start by Newton with an exact line search on the energy
         (:mod:`damped_newton`), with FALLBACK_IT_FACTOR times the iterations. Returns the reason, the residual
         history (plain Newton's but its last, then the damped ones) and the iterations of both."""
         u = self.problem.u
