@@ -444,7 +444,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
         if finer is None:
             zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
             continue
-        if finer.num_cells() * 2 * degree**2 > acc.max_dofs:
+        if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
             raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)")
         geo = finer
         zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
