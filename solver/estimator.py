@@ -72,7 +72,8 @@ class ResidualEstimator:
 
     def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
                  boundaries: tuple[BoundaryConfig, ...], tractions: dict[str, fem.Constant], degree: int,
-                 body_force: fem.Constant | None = None, memory: MemoryProjection | None = None) -> None:
+                 body_force: fem.Constant | None = None, memory: MemoryProjection | None = None,
+                 contact_degree: int | None = None) -> None:
         mesh = geo.mesh
         self.geo = geo
         V0 = fem.FunctionSpace(mesh, ("DG", 0))
@@ -103,7 +104,11 @@ class ResidualEstimator:
             if part.role == "traction":
                 r = traction - tractions[part.name]
             elif part.role == "contact":
+                # at the points where the discrete problem imposes the law (its quadrature): elsewhere on a facet
+                # u_nu - g is not controlled, and p = r_+/mu (1/mu ~ 1e10) would count that as a residual
                 r = traction + compliance(penetration(u, n, gap_function(part, mesh)), part) * n
+                if contact_degree is not None:
+                    ds = geo.ds(geo.tags[part.name], metadata={"quadrature_degree": contact_degree})
             else:  # Dirichlet: no residual
                 continue
             form = form + h * ufl.inner(r, r) * v * ds
@@ -138,7 +143,8 @@ def estimator_for(model) -> ResidualEstimator:
     memory = None
     if model.history is not None:
         memory = MemoryProjection(model.history.M, model.rule.dx, cfg.discretization.u_degree - 1)
-    return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force, memory)
+    return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force, memory,
+                             cfg.solver.contact_quadrature_degree)
 
 
 def dorfler(eta2: np.ndarray, theta: float, comm: MPI.Comm) -> np.ndarray:

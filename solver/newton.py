@@ -16,9 +16,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from .config import SolverConfig
+from .damped_newton import damped_newton
 from .displacement import DisplacementProblem, SolveInfo
 from .errors import DisplacementSolveError
 from .linear import KSP_RTOL_FACTOR, REASONS_SNES, check_options, clear_options, linear_options, rigid_body_modes, set_options
+
+FALLBACK_IT_FACTOR = 8  # the damped fallback's iterations, in units of solver.max_it
 
 
 class NewtonSolver:
@@ -38,6 +41,9 @@ class NewtonSolver:
         self._scale = 1.0
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
+        self._u0 = problem.u.vector.duplicate()  # the level's start, for the fallback
+        self._fallback_krylov = 0
+        self.fallbacks = 0  # levels solved by the damped fallback (:meth:`_fallback`)
         # iterative: CG + GAMG on J with the rigid motions as near-nullspace; each Newton correction starts
         # from zero (the level itself starts from u_{n-1}), and GAMG is set up again only when J changes
         defaults = linear_options(comm, settings.linear, problem.symmetric, settings.rtol, elasticity=True)
@@ -110,6 +116,32 @@ class NewtonSolver:
             return R.DIVERGED_MAX_IT
         return R.ITERATING
 
+    def _fallback(self, history: list[float], its: int) -> tuple[int, list[float], int]:
+        """Plain Newton failed: solve the level again from its start by Newton with an exact line search on the energy
+        (:mod:`damped_newton`), with FALLBACK_IT_FACTOR times the iterations. Returns the reason, the residual
+        history (plain Newton's but its last, then the damped ones) and the iterations of both."""
+        u = self.problem.u
+        self._u0.copy(u.vector)
+        u.x.scatter_forward()
+        cap = FALLBACK_IT_FACTOR * self.settings.max_it
+
+        def converged(it: int, xnorm: float, snorm: float, fnorm: float) -> int:  # the same test, with the cap
+            reason = self._converged(self.snes, it, (xnorm, snorm, fnorm))
+            R = PETSc.SNES.ConvergedReason
+            return R.ITERATING if reason == R.DIVERGED_MAX_IT and it < cap else reason
+
+        set_options(self.prefix, self._defaults, self.settings.petsc_options)
+        try:
+            out = damped_newton(self.problem, self.snes.getKSP(), u.vector, cap, converged, self._project)
+        finally:
+            self._clear_options()
+        u.x.scatter_forward()
+        self.factorizations += out.factorizations
+        self._fallback_krylov = out.krylov_iterations
+        if out.reason > 0:
+            self.fallbacks += 1
+        return out.reason, [*history[:-1], *out.history], its + out.iterations
+
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
         problem, u = self.problem, self.problem.u
@@ -124,6 +156,8 @@ class NewtonSolver:
         self._initial = self._F0
         f0 = self.factorizations
         set_options(self.prefix, self._defaults, self.settings.petsc_options)
+        u.vector.copy(self._u0)
+        self._fallback_krylov = 0
         try:
             self.snes.solve(None, u.vector)
         finally:
@@ -133,13 +167,15 @@ class NewtonSolver:
         reason = self.snes.getConvergedReason()
         history, _ = self.snes.getConvergenceHistory()
         its = self.snes.getIterationNumber()
+        if reason < 0 and problem.contact is not None and problem.Fm is None:
+            reason, history, its = self._fallback(list(history[:its + 1]), its)
         if problem.nonlinear:
             residual = float(history[its]) if len(history) > its else float("nan")
         else:
             problem.evaluate(u.vector, problem.r)
             residual = problem.r.norm()
         ksp_reason = self.snes.getKSP().getConvergedReason()
-        krylov = self.snes.getLinearSolveIterations() if self._project else 0
+        krylov = (self.snes.getLinearSolveIterations() + self._fallback_krylov) if self._project else 0
         self.krylov_iterations += krylov
         tol = self.settings.rtol * scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)

@@ -1,0 +1,50 @@
+"""The damped fallback of the semismooth Newton (solver/damped_newton.py): a level on which plain Newton cycles
+between active sets is solved by it, the same on every number of ranks."""
+
+import pytest
+from conftest import ROOT
+from mpi4py import MPI
+
+from solver.config import load
+from solver.errors import DisplacementSolveError
+from solver.newton import NewtonSolver
+from solver.stepper import build_model, run
+
+# configs/hard.toml (a large swinging traction, mu = 1e-10) with P2 on its 16 x 16 mesh: at t = 0.45 plain
+# Newton cycles through three active sets until max_it
+CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
+
+
+def _run(comm):
+    model = build_model(load(ROOT / "configs" / "hard.toml", CYCLING), comm)
+    return model, run(model, None)
+
+
+def test_plain_newton_cycles_on_the_scene(comm, monkeypatch):
+    """Without the fallback the scene fails (so the next test is about a real failure)."""
+    def no_fallback(self, history, its):
+        return -5, history, its  # DIVERGED_MAX_IT, as plain Newton left it
+
+    monkeypatch.setattr(NewtonSolver, "_fallback", no_fallback)
+    with pytest.raises(DisplacementSolveError) as err:
+        _run(comm)
+    assert err.value.reason == "DIVERGED_MAX_IT"
+    assert err.value.step == 9
+
+
+def test_the_damped_fallback_solves_the_cycling_level(comm):
+    model, rows = _run(comm)
+    newton = model.mech.solver
+    assert newton.fallbacks >= 1
+    assert len(rows) == 10
+    # the converged level's residual, evaluated again: within the tolerance it was solved to
+    problem = model.mech.problem
+    scale = problem.begin_level(rows[-1]["t"])
+    problem.evaluate(model.u.vector, problem.r)
+    assert problem.r.norm() <= model.cfg.solver.rtol * scale
+    # and the same levels on one rank (the partition does not change the answer)
+    if comm.size > 1:
+        serial, srows = _run(MPI.COMM_SELF)
+        for a, b in zip(rows, srows):
+            assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-9)
+            assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-8, abs=1e-10)
