@@ -167,7 +167,7 @@ class NewtonSolver:
         reason = self.snes.getConvergedReason()
         history, _ = self.snes.getConvergenceHistory()
         its = self.snes.getIterationNumber()
-        if reason < 0 and problem.contact is not None and problem.Fm is None:
+        if reason < 0 and problem.contact is not None and problem.Fm is None and self.settings.newton_fallback:
             reason, history, its = self._fallback(list(history[:its + 1]), its)
         if problem.nonlinear:
             residual = float(history[its]) if len(history) > its else float("nan")

@@ -51,10 +51,12 @@ def test_check_and_no_overwrite(tmp_path):
 
 @pytest.mark.parametrize("nproc", [1, 2])
 def test_solver_failure_stops_cleanly(tmp_path, nproc):
-    """Example 3 unloads at t = 0.55 (6 Newton iterations at k = 0.05); with max_it = 4 that step fails."""
+    """Example 3 unloads at t = 0.55 (6 Newton iterations at k = 0.05); with max_it = 4 and no fallback that step
+    fails (the default damped fallback solves it: tests/test_damped_newton.py)."""
     out = tmp_path / "o"
     res = cli(["run", "configs/example3.toml", "--output", str(out), "--no-progress", "--set", "time.k=0.05",
-               "--set", "solver.max_it=4", "--set", "output.checkpoint_every=5", "--set", "output.every=2"], nproc)
+               "--set", "solver.max_it=4", "--set", "solver.newton_fallback=false", "--set", "output.checkpoint_every=5",
+               "--set", "output.every=2"], nproc)
     assert res.returncode == 1
     msg = [ln for ln in res.stderr.splitlines() if ln.startswith("failed:")]
     assert len(msg) == 1 and "Traceback" not in res.stderr

@@ -50,6 +50,7 @@ REJECT = [
     ({"mesh": {"nx": 0}}, "mesh.nx"),
     ({"mesh": {"nx": 8.5}}, "mesh.nx"),
     ({"mesh": {"nx": True}}, "mesh.nx"),
+    ({"solver": {"newton_fallback": "yes"}}, "solver.newton_fallback"),
     ({"mesh": {"nx": 100000, "ny": 100000}}, "mesh.nx*mesh.ny"),
     ({"mesh": {"diagonal": "up"}}, "mesh.diagonal"),
     ({"mesh": {"kind": "gmsh", "file": "nope.msh"}}, "mesh.file"),

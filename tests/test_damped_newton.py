@@ -7,7 +7,6 @@ from mpi4py import MPI
 
 from solver.config import load
 from solver.errors import DisplacementSolveError
-from solver.newton import NewtonSolver
 from solver.stepper import build_model, run
 
 # configs/hard.toml (a large swinging traction, mu = 1e-10) with P2 on its 16 x 16 mesh: at t = 0.45 plain
@@ -15,19 +14,16 @@ from solver.stepper import build_model, run
 CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
 
 
-def _run(comm):
-    model = build_model(load(ROOT / "configs" / "hard.toml", CYCLING), comm)
+def _run(comm, extra=()):
+    model = build_model(load(ROOT / "configs" / "hard.toml", [*CYCLING, *extra]), comm)
     return model, run(model, None)
 
 
-def test_plain_newton_cycles_on_the_scene(comm, monkeypatch):
-    """Without the fallback the scene fails (so the next test is about a real failure)."""
-    def no_fallback(self, history, its):
-        return -5, history, its  # DIVERGED_MAX_IT, as plain Newton left it
-
-    monkeypatch.setattr(NewtonSolver, "_fallback", no_fallback)
+def test_plain_newton_cycles_on_the_scene(comm):
+    """Without the fallback (solver.newton_fallback = false) the scene fails (so the next test is about a real
+    failure)."""
     with pytest.raises(DisplacementSolveError) as err:
-        _run(comm)
+        _run(comm, ["solver.newton_fallback=false"])
     assert err.value.reason == "DIVERGED_MAX_IT"
     assert err.value.step == 9
 

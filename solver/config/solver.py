@@ -6,7 +6,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from .fields import Ctx, check_keys, integer, names, need, number, string
+from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
 
 METHODS = ("newton", "penalty_duality", "fixed_point")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
@@ -19,6 +19,10 @@ class SolverConfig:
     """Solver settings: the displacement method (newton | penalty_duality | fixed_point) with its
     tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
     damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees.
+
+    ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
+    again by Newton with an exact line search on the level's energy (solver/damped_newton.py), with
+    up to newton.FALLBACK_IT_FACTOR * max_it iterations; false: such a level fails at ``max_it``.
 
     ``linear = "auto"`` is resolved on the mesh (linear.choose_linear): in 2-D PETSc's sequential Cholesky on one
     process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below linear.AUTO_ITERATIVE_DOFS_3D = 10,000
@@ -35,6 +39,7 @@ class SolverConfig:
     damage_quadrature_degree: int = 0
     contact_quadrature_degree: int = 0
     petsc_options: tuple[tuple[str, str], ...] = ()
+    newton_fallback: bool = True
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
@@ -73,8 +78,9 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:
         raise ctx.fail("solver.damage_scheme", damage_scheme, "is first order; time.order = 2 uses its own damage step")
+    fallback = boolean(ctx, "solver.newton_fallback", t.get("newton_fallback", d.newton_fallback))
     return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs,
-                        petsc_options=_petsc_options(ctx, t.get("petsc_options", {})))
+                        petsc_options=_petsc_options(ctx, t.get("petsc_options", {})), newton_fallback=fallback)
 
 
 def _petsc_options(ctx: Ctx, opts) -> tuple[tuple[str, str], ...]:
