@@ -58,14 +58,19 @@ def damped_newton(problem: DisplacementProblem, ksp: PETSc.KSP, start: PETSc.Vec
             v.destroy()
 
 
+def _along(y: PETSc.Vec, lam: float, d: PETSc.Vec, x: PETSc.Vec, bcs, project: bool) -> None:
+    """y = x + lam d, put on the Dirichlet values where an iterative solve leaves them off (``project``)."""
+    y.waxpy(lam, d, x)
+    if project:
+        fpetsc.set_bc(y, bcs)
+
+
 def _line_minimum(problem, x, d, y, F, slope: float, project: bool) -> float:
     """The step length in (0, 1] that minimizes E(x + lam d): the root of phi'(lam) = F(x + lam d).d, which is
     nondecreasing (E is convex) and piecewise smooth; found by the Illinois variant of regula falsi. Uses y
     and F as work vectors."""
     def dphi(lam: float) -> float:
-        y.waxpy(lam, d, x)
-        if project:
-            fpetsc.set_bc(y, problem.bcs)
+        _along(y, lam, d, x, problem.bcs, project)
         problem.evaluate(y, F)
         return F.dot(d)
 
@@ -116,9 +121,7 @@ def _iterate(problem, ksp, x, max_it, converged, project, F, d, y) -> DampedResu
             out.reason = R.DIVERGED_LINEAR_SOLVE
             return out
         slope = F.dot(d)  # phi'(0) for phi(lam) = E(x + lam d); < 0 for a descent direction
-        y.waxpy(1.0, d, x)
-        if project:
-            fpetsc.set_bc(y, bcs)
+        _along(y, 1.0, d, x, bcs, project)
         lam = 1.0
         changed = problem.update_jacobian(y)  # J at the full step (kept if the full step is taken)
         stale = stale or changed
@@ -126,9 +129,7 @@ def _iterate(problem, ksp, x, max_it, converged, project, F, d, y) -> DampedResu
             lam = _line_minimum(problem, x, d, y, F, slope, project)
             if lam < 1.0:
                 contact.forget()  # J was assembled at the full step: rebuild it at the new iterate
-            y.waxpy(lam, d, x)
-            if project:
-                fpetsc.set_bc(y, bcs)
+            _along(y, lam, d, x, bcs, project)
         y.copy(x)
         snorm = lam * d.norm()
         problem.evaluate(x, F)

@@ -41,6 +41,8 @@ class NewtonSolver:
         self._scale = 1.0
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
+        # the damped fallback needs an energy: contact without the implicit memory term (and the scene may turn it off)
+        self._can_fall_back = settings.newton_fallback and problem.contact is not None and problem.Fm is None
         self._u0 = problem.u.vector.duplicate()  # the level's start, for the fallback
         self._fallback_krylov = 0
         self.fallbacks = 0  # levels solved by the damped fallback (:meth:`_fallback`)
@@ -156,7 +158,8 @@ class NewtonSolver:
         self._initial = self._F0
         f0 = self.factorizations
         set_options(self.prefix, self._defaults, self.settings.petsc_options)
-        u.vector.copy(self._u0)
+        if self._can_fall_back:
+            u.vector.copy(self._u0)
         self._fallback_krylov = 0
         try:
             self.snes.solve(None, u.vector)
@@ -167,7 +170,7 @@ class NewtonSolver:
         reason = self.snes.getConvergedReason()
         history, _ = self.snes.getConvergenceHistory()
         its = self.snes.getIterationNumber()
-        if reason < 0 and problem.contact is not None and problem.Fm is None and self.settings.newton_fallback:
+        if reason < 0 and self._can_fall_back:
             reason, history, its = self._fallback(list(history[:its + 1]), its)
         if problem.nonlinear:
             residual = float(history[its]) if len(history) > its else float("nan")
