@@ -11,8 +11,10 @@ default one half, bounds the time part's share by 1 - space_share):
   measured values rounded up.
   The t = 0 problem is solved on meshes refined by Dörfler marking until C eta_0 times the
   growth of eta over the run (measured on the start mesh) is within its share;
-- **space, damage** -- the difference of zeta on the start mesh and on its uniform refinement,
-  at the same step (a first-order bound: twice the difference); the adapted mesh is finer;
+- **space, damage** -- the differences of zeta on the chosen mesh and on up to two earlier,
+  nested meshes of its sequence, at the same step (the time error cancels): with e ~ cells^-s,
+  s observed from the two differences within [1/2, 1] (a rate of 1 to 2 in h), e = D / (ratio^s - 1);
+  with one earlier mesh s = 1/2, with none the difference to the uniform refinement (e = 2 D);
 - **time** -- step doubling on the start mesh with the lowest degree (the time error hardly
   depends on the degree): runs at k0, k0/2 and k0/4 (k0 = T/10) give the observed order p
   (at most the scheme's) and the error of k0/4, D/(2^p - 1); the step is the largest
@@ -50,7 +52,10 @@ N0 = 10  # the coarsest step is T / N0; every step considered is T / (N0 2^j)
 SAFETY = 0.8
 ADAPTED_RATE = {1: 0.49, 2: 1.02}  # error ~ dofs^-rate on Dörfler-adapted meshes (estimator.md, Example 1)
 GROWTH_AT_0 = 1.5  # eta growing more over the run: adapt to its largest level instead of t = 0
+THETA_MAX = 0.95  # the largest Dörfler fraction (far from the target)
 ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
+# zeta's error e ~ cells^-s on nested meshes: s observed, within [1/2, 1] (rate 1 to 2 in h, P1's best in L2)
+ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX = 0.5, 1.0
 CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "time.order")
 
 
@@ -197,9 +202,10 @@ class _Worst:
 
 
 def _theta(theta: float, ratio: float) -> float:
-    """The Dörfler fraction: ``theta`` near the target; far from it (estimate/target > 4) a larger one, so
-    that fewer solve-estimate-refine rounds are needed (each is a mesh to build)."""
-    return theta if ratio <= 4.0 else max(theta, 0.8)
+    """The Dörfler fraction for an estimate ``ratio`` times its target: the cells carrying 1 - 1/ratio^2 of
+    eta^2 (refining them all away would leave the target's eta^2), at least ``theta`` and at most THETA_MAX, so
+    that few solve-estimate-refine rounds are needed (each is a mesh to build)."""
+    return min(THETA_MAX, max(theta, 1.0 - 1.0 / ratio**2))
 
 
 def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, theta: float, max_dofs: int,
@@ -300,26 +306,36 @@ def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, 
     return p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1)
 
 
-def _zeta_difference(path, overrides, comm, coarse_geo, fine_geo) -> float:
-    """max over levels of ||zeta_coarse - zeta_fine|| for runs at the same step on two nested meshes (the time
-    error cancels); 0 without damage. If Newton fails, both runs are repeated with half the step."""
+def _zeta_runs(path, overrides, comm, geos, kept: dict) -> list[_Pilot] | None:
+    """Runs at the same step on nested meshes (the time error cancels in their differences); None without damage.
+    If Newton fails on one, all are repeated with half the step. ``kept``: runs already made, by (mesh, step)."""
+    k = _load(path, overrides).time.k
+    for halving in range(4):
+        step = k / 2**halving
+        over = [*overrides, f"time.k={step!r}"]
+        try:
+            runs = []
+            for geo in geos:
+                key = (id(geo), step)
+                if key not in kept:
+                    kept[key] = _Pilot(path, over, comm, geo)
+                runs.append(kept[key])
+                if not runs[0].zeta:
+                    return None
+            return runs
+        except SolveFailure:
+            if halving == 3:
+                raise
+    return None
+
+
+def _zeta_difference(coarse: _Pilot, fine: _Pilot, comm: MPI.Comm) -> float:
+    """max over levels of ||zeta_coarse - zeta_fine||, the coarse zeta interpolated on the fine (nested) mesh."""
     import ufl
     from dolfinx import fem
 
     from .reference import interpolation_matrix
 
-    k = _load(path, overrides).time.k
-    for halving in range(4):  # a step Newton cannot take on these meshes is halved, for both runs
-        over = [*overrides, f"time.k={k / 2**halving!r}"]
-        try:
-            coarse = _Pilot(path, over, comm, coarse_geo)
-            if not coarse.zeta:
-                return 0.0
-            fine = _Pilot(path, over, comm, fine_geo)
-            break
-        except SolveFailure:
-            if halving == 3:
-                raise
     Zf = fine.model.damage.V
     owned = Zf.dofmap.index_map.size_local
     P = interpolation_matrix(coarse.model.damage.V, Zf.tabulate_dof_coordinates()[:owned, :2])
@@ -333,23 +349,61 @@ def _zeta_difference(path, overrides, comm, coarse_geo, fine_geo) -> float:
     return worst
 
 
-def _zeta_space(path, overrides, comm, geo, earlier=None) -> tuple[float, object | None]:
-    """Estimate of zeta's space error on ``geo``: from the difference D to an ``earlier`` mesh that ``geo``
-    refines (h shrinks by rho = sqrt(cells ratio)), e = D rho / (1 - rho); without one, from ``geo``'s uniform
-    refinement, e = 2 D. Both assume a rate of at least 1 in h (P1 zeta converges faster where it is smooth).
-    Returns the estimate and the uniform refinement (or None)."""
+def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float) -> float:
+    """The exponent s of e(N) = A N^-s (N cells) from the differences of three nested meshes a, b, c:
+    d_ab / d_bc = (N_a^-s - N_b^-s) / (N_b^-s - N_c^-s), solved for s within [ZETA_EXPONENT_MIN,
+    ZETA_EXPONENT_MAX] (a ratio outside what that range gives is clamped to its end)."""
+    na, nb, nc = (float(n) for n in cells)
+
+    def model(s: float) -> float:
+        return (na**-s - nb**-s) / (nb**-s - nc**-s)
+
+    lo, hi = ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX
+    ratio = d_ab / d_bc if d_bc > 0 else math.inf
+    if not ratio > model(lo):  # also NaN
+        return lo
+    if ratio >= model(hi):
+        return hi
+    for _ in range(60):  # model(s) increases with s
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if model(mid) < ratio else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None) -> tuple[float, object | None]:
+    """Estimate of zeta's space error on ``geo``, from its differences to ``earlier`` meshes that ``geo`` refines
+    (the coarsest first), with e(N) = A N^-s over the number of cells N:
+    - two earlier meshes a, b: s observed from the two differences (:func:`observed_exponent`: at least 1/2, a
+      rate of 1 in h, at most 1, P1's rate of 2 in h), and e = D_bc / ((N_c / N_b)^s - 1);
+    - one: s = 1/2 (rho = sqrt(N_b / N_c), e = D rho / (1 - rho));
+    - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
+    ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate and the uniform refinement (or
+    None)."""
     from .adapt import refine
 
-    if earlier is not None:
-        rho = math.sqrt(earlier.num_cells() / geo.num_cells())
-        return _zeta_difference(path, overrides, comm, earlier, geo) * rho / (1.0 - rho), None
-    tdim = geo.mesh.topology.dim
-    finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
-    return 2.0 * _zeta_difference(path, overrides, comm, geo, finer), finer
+    finer = None
+    if earlier:
+        meshes = [*earlier[-2:], geo]
+    else:
+        tdim = geo.mesh.topology.dim
+        finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
+        meshes = [geo, finer]
+    runs = _zeta_runs(path, overrides, comm, meshes, {} if kept is None else kept)
+    if runs is None:
+        return 0.0, finer
+    cells = [m.num_cells() for m in meshes]
+    if finer is not None:
+        return 2.0 * _zeta_difference(runs[0], runs[1], comm), finer
+    d_bc = _zeta_difference(runs[-2], runs[-1], comm)
+    s = 0.5
+    if len(runs) == 3:
+        s = observed_exponent(tuple(cells), _zeta_difference(runs[0], runs[1], comm), d_bc)
+    return d_bc / ((cells[-1] / cells[-2]) ** s - 1.0), None
 
 
 def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
+    from .adapt import refine
     from .geometry import build
 
     t_start = time.perf_counter()
@@ -434,20 +488,25 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
         geo, _ = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
                         seqs[degree], log, marked=(geo, eta2), level=level)
     best = seqs[degree][-1]
-    # 4. zeta's space error on the chosen mesh (against an earlier mesh of the sequence with at most a quarter
-    # of its cells, or its uniform refinement); refined uniformly while the two space parts exceed the share
+    # 4. zeta's space error on the chosen mesh, from its differences to up to two earlier meshes of the sequence
+    # (each with at most a quarter of the next one's cells) or to its uniform refinement; the mesh is refined
+    # uniformly while the two space parts exceed the share (the earlier runs are kept, not repeated)
     run_k0 = [*base_full, f"discretization.u_degree={degree}"]
-    earlier = [r["_geo"] for r in seqs[degree] if "_geo" in r and r["cells"] * 4 <= best["cells"]]
-    zeta_space, finer = _zeta_space(path, run_k0, comm, geo, earlier[-1] if earlier else None)
+    chain: list = []  # the coarsest first
+    for r in reversed(seqs[degree]):
+        if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
+            chain.insert(0, r["_geo"])
+    runs: dict = {}
+    zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
     log(f"  zeta's space error on it <= {zeta_space:.3e}")
     while best["estimate"] * max(g, 1.0) + zeta_space > share_s:
         if finer is None:
-            zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
-            continue
+            tdim = geo.mesh.topology.dim
+            finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
         if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
             raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)")
-        geo = finer
-        zeta_space, finer = _zeta_space(path, run_k0, comm, geo)
+        chain, geo = [*chain, geo][-2:], finer
+        zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
         lv = level(path, chosen, comm, geo)
         best = {"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                 "estimate": Cs[degree] * lv.eta, "uniform": True}

@@ -11,7 +11,7 @@ from conftest import ROOT
 from conftest import run_cli as cli
 from mpi4py import MPI
 
-from solver.accuracy import contradicting, plan
+from solver.accuracy import ZETA_EXPONENT_MAX, ZETA_EXPONENT_MIN, _theta, contradicting, observed_exponent, plan
 from solver.config import load
 from solver.errors import ConfigError
 
@@ -21,6 +21,31 @@ SHORT = ["time.T=0.2"]  # the paper's Example 1 over 0.2 s: quick, with memory a
 
 def _plan(comm, tol, extra=()):
     return plan(SCENE, [*SHORT, f"accuracy.tolerance={tol!r}", *extra], comm, log=lambda *a: None)
+
+
+@pytest.mark.parametrize("s", [0.55, 0.7, 0.9])
+def test_the_observed_exponent_recovers_a_power_law(s):
+    cells = (32, 212, 938)  # uneven ratios, as an adapted sequence gives
+    e = [3.0 * n**-s for n in cells]
+    assert observed_exponent(cells, e[0] - e[1], e[1] - e[2]) == pytest.approx(s, rel=1e-9)
+    # the estimate it gives on the finest mesh is then that mesh's error
+    assert (e[1] - e[2]) / ((cells[2] / cells[1]) ** s - 1.0) == pytest.approx(e[2], rel=1e-9)
+
+
+def test_the_observed_exponent_is_clamped():
+    cells = (50, 200, 800)
+    slow = [n**-0.2 for n in cells]  # slower than a rate 1 in h: the estimate assumes rate 1 (and says less)
+    fast = [n**-1.5 for n in cells]  # faster than P1 can converge: taken as rate 2
+    assert observed_exponent(cells, slow[0] - slow[1], slow[1] - slow[2]) == ZETA_EXPONENT_MIN
+    assert observed_exponent(cells, fast[0] - fast[1], fast[1] - fast[2]) == ZETA_EXPONENT_MAX
+    assert observed_exponent(cells, 1e-3, 0.0) == ZETA_EXPONENT_MAX  # no difference left on the finest pair
+    assert observed_exponent(cells, math.nan, 1e-3) == ZETA_EXPONENT_MIN
+
+
+def test_the_dorfler_fraction_follows_the_distance_to_the_target():
+    assert _theta(0.5, 1.1) == 0.5  # near: the scene's theta
+    assert _theta(0.5, 3.0) == pytest.approx(1.0 - 1.0 / 9.0)
+    assert _theta(0.5, 100.0) == 0.95  # far: capped
 
 
 @pytest.mark.parametrize("bad", ["nan", "0", "1", "1.5", "-1e-3", "inf", '"small"'])
