@@ -209,10 +209,12 @@ def _theta(theta: float, ratio: float) -> float:
 
 
 def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, theta: float, max_dofs: int,
-           max_steps: int | None, seq: list[dict], log, marked=None, level=None) -> tuple[object, np.ndarray | None]:
+           max_steps: int | None, seq: list[dict], log, marked=None, level=None, tol: float | None = None
+           ) -> tuple[object, np.ndarray | None]:
     """Dörfler-refine until C eta_0 <= target (or ``max_steps`` meshes solved), appending each mesh's record to
-    ``seq``. ``marked``: (geo, eta2) of a mesh already solved, to refine first. ``level``: what is solved on a
-    mesh (:class:`_Level0`, the default, or :class:`_Worst`). Returns the last mesh and its eta_K^2."""
+    ``seq``; beyond ``max_dofs``, a ToleranceError for the user's ``tol`` (default: the target). ``marked``:
+    (geo, eta2) of a mesh already solved, to refine first. ``level``: what is solved on a mesh
+    (:class:`_Level0`, the default, or :class:`_Worst`). Returns the last mesh and its eta_K^2."""
     from .adapt import refine
     from .estimator import dorfler
 
@@ -229,7 +231,8 @@ def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, the
         if rec["estimate"] <= target or (max_steps is not None and solved >= max_steps):
             return lv.model.geo, lv.eta2
         if rec["dofs"] > max_dofs:
-            raise ToleranceError(target, rec["estimate"], rec["dofs"], "accuracy.max_dofs")
+            raise ToleranceError(target if tol is None else tol, rec["estimate"], rec["dofs"], "accuracy.max_dofs",
+                                 target=target)
         geo = refine(lv.model.geo, np.flatnonzero(dorfler(lv.eta2, _theta(theta, rec["estimate"] / target), comm)))
 
 
@@ -472,7 +475,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     cost = {}
     for d in acc.degrees:
         last[d] = _adapt(path, base, comm, geo0, d, Cs[d], share_s / g, acc.theta, acc.max_dofs, 1, seqs[d], log,
-                         level=level)
+                         level=level, tol=tol)
         first = seqs[d][0]
         needed = first["dofs"] * max(first["estimate"] * g / share_s, 1.0) ** (1.0 / ADAPTED_RATE[d])
         cost[d] = COST_PER_DOF[d] * needed
@@ -486,7 +489,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     geo, eta2 = last[degree]
     if seqs[degree][-1]["estimate"] > target:  # go on from the probe's last mesh
         geo, _ = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
-                        seqs[degree], log, marked=(geo, eta2), level=level)
+                        seqs[degree], log, marked=(geo, eta2), level=level, tol=tol)
     best = seqs[degree][-1]
     # 4. zeta's space error on the chosen mesh, from its differences to up to two earlier meshes of the sequence
     # (each with at most a quarter of the next one's cells) or to its uniform refinement; the mesh is refined
@@ -504,7 +507,8 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
             tdim = geo.mesh.topology.dim
             finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
         if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
-            raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)")
+            raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)",
+                                 target=share_s - best["estimate"] * max(g, 1.0))
         chain, geo = [*chain, geo][-2:], finer
         zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
         lv = level(path, chosen, comm, geo)

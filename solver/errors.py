@@ -67,12 +67,14 @@ def show(value: Any) -> str:
 
 class ToleranceError(InputError):
     """A tolerance the solver cannot reach within its limits: the best ``estimate`` at ``dofs`` is above
-    ``tolerance``; ``limit`` names the setting that stopped it."""
+    ``tolerance`` (the user's, absolute), or above ``target``, the part of it one error term was given;
+    ``limit`` names the setting that stopped it."""
 
-    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str) -> None:
-        self.tolerance, self.estimate, self.dofs, self.limit = tolerance, estimate, dofs, limit
+    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str, target: float | None = None) -> None:
+        self.tolerance, self.estimate, self.dofs, self.limit, self.target = tolerance, estimate, dofs, limit, target
+        part = "" if target is None else f" against its part {target:.3g}"
         super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit} "
-                         f"(estimate {estimate:.3g} at {dofs} displacement dofs)")
+                         f"(estimate {estimate:.3g}{part} at {dofs} displacement dofs)")
 
 
 # ----------------------------------------------------------------------------- run failures

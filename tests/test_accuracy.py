@@ -147,3 +147,14 @@ def test_a_tolerance_on_a_3d_scene_is_refused():
     with pytest.raises(ConfigError) as err:
         load(ROOT / "configs/example1_3d.toml", ["accuracy.tolerance=1e-2"])
     assert err.value.key == "accuracy.tolerance" and "2-D" in err.value.allowed
+
+
+def test_a_tolerance_out_of_reach_names_the_users_tolerance_and_the_parts_target():
+    from solver.errors import ToleranceError
+
+    with pytest.raises(ToleranceError) as info:
+        _plan(MPI.COMM_WORLD, 1e-3, ["accuracy.max_dofs=300"])
+    err = info.value
+    assert err.tolerance == 1e-3 and err.limit == "accuracy.max_dofs"
+    assert err.target is not None and 0.0 < err.target < 1e-3 and err.estimate > err.target and err.dofs > 300
+    assert "accuracy.tolerance = 0.001 " in str(err)
