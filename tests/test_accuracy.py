@@ -158,3 +158,24 @@ def test_a_tolerance_out_of_reach_names_the_users_tolerance_and_the_parts_target
     assert err.tolerance == 1e-3 and err.limit == "accuracy.max_dofs"
     assert err.target is not None and 0.0 < err.target < 1e-3 and err.estimate > err.target and err.dofs > 300
     assert "accuracy.tolerance = 0.001 " in str(err)
+
+
+def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatch):
+    """zeta's space estimate on the chosen mesh (three nested meshes, observed exponent) is at least the
+    difference to that mesh refined uniformly twice (16 times the cells), at the same step."""
+    from solver import accuracy
+    from solver.adapt import refine
+
+    seen = []
+    original = accuracy._zeta_space
+    monkeypatch.setattr(accuracy, "_zeta_space", lambda *a, **k: seen.append(original(*a, **k)) or seen[-1])
+    p = _plan(MPI.COMM_WORLD, 3e-3)
+    fine = p.geo
+    for _ in range(2):
+        fine = refine(fine, np.arange(fine.mesh.topology.index_map(2).size_local))
+    over = [*SHORT, *p.start, f"discretization.u_degree={p.degree}", f"time.order={p.order}", "time.k=0.02"]
+    coarse_run, fine_run = accuracy._zeta_runs(SCENE, over, MPI.COMM_WORLD, [p.geo, fine], {})
+    measured = accuracy._zeta_difference(coarse_run, fine_run, MPI.COMM_WORLD)
+    assert seen and measured > 0.0
+    assert seen[-1][0] >= measured, (seen[-1][0], measured)
+    assert p.estimate["space_zeta"] == seen[-1][0]
