@@ -297,3 +297,19 @@ def test_box_round_trips_and_is_three_dimensional():
     again = from_dict(to_dict(cfg), source=cfg.source)
     assert again == cfg
     assert "diagonal" not in to_dict(cfg)["mesh"] and "nz" not in to_dict(load(ROOT / "configs/example1.toml"))["mesh"]
+
+
+def test_a_gmsh_files_dimension_is_read_once_per_version_of_the_file(tmp_path):
+    import os
+    import shutil
+
+    from solver.config.mesh import _gmsh_dim, gmsh_dim
+
+    msh = tmp_path / "m.msh"
+    shutil.copy(ROOT / "meshes" / "example2.msh", msh)
+    assert gmsh_dim(str(msh)) == 2
+    hits = _gmsh_dim.cache_info().hits
+    assert gmsh_dim(str(msh)) == 2 and _gmsh_dim.cache_info().hits == hits + 1
+    os.utime(msh, ns=(0, 1))  # a new version of the file (another mtime): read again
+    misses = _gmsh_dim.cache_info().misses
+    assert gmsh_dim(str(msh)) == 2 and _gmsh_dim.cache_info().misses == misses + 1

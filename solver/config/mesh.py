@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,7 +101,20 @@ def to_toml(m: MeshConfig) -> dict:
 
 
 def gmsh_dim(path: str) -> int:
-    """Geometric dimension of a .msh file: 3 if any node has z != 0."""
+    """Geometric dimension of a .msh file: 3 if any node has z != 0 (read once per version of the file: a tolerance
+    run loads its scene a dozen times)."""
+    import os
+
+    try:
+        st = os.stat(path)
+        version = (os.path.realpath(path), st.st_mtime_ns, st.st_size)
+    except OSError:
+        version = (path, None, None)  # gmsh reports the problem
+    return _gmsh_dim(*version)
+
+
+@functools.lru_cache(maxsize=64)
+def _gmsh_dim(path: str, mtime_ns: int | None, size: int | None) -> int:
     import gmsh  # local import: only gmsh scenes pay for it
 
     gmsh.initialize()  # gmsh 4.8 (Debian bookworm) has no isInitialized(): own the session here
