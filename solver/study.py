@@ -382,6 +382,16 @@ def _run_groups(fn, groups: list[tuple], jobs: int) -> list[dict]:
     return rows
 
 
+def _scene_ref_tol(item: str):
+    """argparse type of ``--scene-ref-tol``: (scene, tolerance), or a usage error (exit 2)."""
+    from .tolerance_study import scene_ref_tol
+
+    try:
+        return scene_ref_tol(item)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver study", description="stability map and work-precision chart")
     sub = p.add_subparsers(dest="which", required=True)
@@ -438,6 +448,8 @@ def main(argv: list[str] | None = None) -> int:
     to.add_argument("--scenes", nargs="+", default=list(TOL_SCENES), choices=list(TOL_SCENES))
     to.add_argument("--tols", type=float, nargs="+", default=list(TOLS))
     to.add_argument("--ref-tol", type=float, default=1e-4, help="tolerance of the P2 reference run")
+    to.add_argument("--scene-ref-tol", nargs="+", metavar="NAME=TOL", default=[], type=_scene_ref_tol,
+                    help="a scene's own reference tolerance where --ref-tol is out of reach (stated in the output)")
     to.add_argument("--levels", type=int, default=6, help="uniform meshes per series (n = 4, 8, ... or r = 0, 1, ...)")
     to.add_argument("--steps", type=int, nargs="+", default=[10, 20, 40, 80], help="uniform steps per run (T / k)")
     args = p.parse_args(argv)

@@ -1,0 +1,73 @@
+"""study tolerance: a scene's own reference tolerance (--scene-ref-tol), how it is kept and stated in the output."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+from conftest import ROOT, solver_cmd
+
+from solver.tolerance_study import _kept, _write, scene_ref_tol
+
+
+def test_scene_ref_tol_parses_name_and_tolerance():
+    assert scene_ref_tol("hard=3e-4") == ("hard", 3e-4)
+    assert scene_ref_tol("example1-gap0.02=0.0002") == ("example1-gap0.02", 2e-4)
+
+
+@pytest.mark.parametrize("item,word", [("nosuch=1e-4", "NAME=TOL"), ("hard", "NAME=TOL"), ("hard=0", "between"),
+                                       ("hard=1", "between"), ("hard=nan", "between"), ("hard=abc", "between")])
+def test_scene_ref_tol_refuses_bad_items(item, word):
+    with pytest.raises(ValueError, match=word):
+        scene_ref_tol(item)
+
+
+def _scene(ref_tol=None, failure=False):
+    ref = {"failure": "out of reach"} if failure else {"cells": 10, "dofs": 50, "k": 0.025, "estimate": 2e-4,
+                                                       "seconds": 1.0, "second_vs_first": 3e-4}
+    if ref_tol is not None:
+        ref["ref_tol"] = ref_tol
+    run = {"tolerance": 3e-3, "error": 1.5e-3, "estimate": 2.5e-3, "degree": 2, "order": 2, "k": 0.1, "cells": 100,
+           "dofs": 500, "planning_seconds": 0.5, "loop_seconds": 0.1, "cost": 0.6, "failure": None,
+           "uniform_best": None}
+    return {"reference": ref, "runs": [] if failure else [run], "uniform": []}
+
+
+def test_a_kept_scene_must_have_the_reference_tolerance_asked_of_it():
+    earlier = {"tolerances": [1e-2, 3e-3], "ref_tol": 1e-4,
+               "scenes": {"example1": _scene(1e-4), "hard": _scene(1e-3), "example2": _scene(),  # no key: the global
+                          "example3": _scene(1e-4, failure=True)}}
+    scenes = ["example1", "hard", "example2", "example3"]
+    assert set(_kept(earlier, [1e-2, 3e-3], 1e-4, {"hard": 1e-3}, scenes)) == {"example1", "hard", "example2"}
+    assert set(_kept(earlier, [1e-2, 3e-3], 1e-4, {}, scenes)) == {"example1", "example2"}  # hard was at 1e-3
+    assert set(_kept(earlier, [1e-2, 3e-3], 1e-4, {"hard": 1e-3}, ["hard"])) == {"hard"}
+    assert _kept(earlier, [1e-2], 1e-4, {"hard": 1e-3}, scenes) == {}  # other tolerances: nothing is kept
+
+
+def test_the_output_states_a_scenes_own_reference_tolerance(tmp_path):
+    result = {"tolerances": [3e-3], "ref_tol": 1e-4,
+              "scenes": {"example1": _scene(1e-4), "hard": _scene(1e-3), "example1-gap0.02": _scene(2e-4, failure=True)}}
+    _write(result, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    ref_rows = [line for line in md.splitlines() if line.startswith("| hard | 0.001")]
+    assert ref_rows and "(this scene's own)" in ref_rows[0], md
+    assert any(line.startswith("| example1 | 0.0001 |") and "own" not in line for line in md.splitlines()), md
+    assert "reference's own error / TOL" in md
+    run_row = next(line for line in md.splitlines() if line.startswith("| hard | 0.003 |"))
+    assert "| 0.10 |" in run_row, run_row  # its reference's own error 3e-4 over TOL 3e-3
+    assert "example1-gap0.02: no reference at 0.0002: out of reach" in md
+    rows = (tmp_path / "tolerance.csv").read_text().splitlines()
+    assert "ref_tol" in rows[0].split(",") and "ref_error_over_tol" in rows[0].split(",")
+    back = json.loads((tmp_path / "tolerance.json").read_text())
+    assert back["scenes"]["hard"]["reference"]["ref_tol"] == 1e-3
+
+
+@pytest.mark.serial
+def test_a_bad_scene_reference_tolerance_is_a_usage_error(tmp_path):
+    out = tmp_path / "o"
+    res = subprocess.run(solver_cmd(["study", "tolerance", "--scene-ref-tol", "hard=2", "--output", str(out)]),
+                         cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 2, res.stderr
+    assert "--scene-ref-tol" in res.stderr and "between 0 and 1" in res.stderr and "Traceback" not in res.stderr
+    assert not out.exists()
