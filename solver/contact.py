@@ -99,7 +99,8 @@ class ContactTerm:
     With the linear and limited-penetration laws the problem is piecewise linear, so C changes
     only when the active set does; with the power law it changes with u. A fingerprint C r
     (r a fixed random vector) tells whether C changed: a missed change could cost Newton
-    iterations, never accuracy (the residual decides convergence).
+    iterations, never accuracy (the residual decides convergence). ``piecewise_linear``: no part has
+    the power law, so a Newton iterate depends only on the active set it was computed from.
     """
 
     def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
@@ -116,6 +117,7 @@ class ContactTerm:
         self._probe.setRandom(PETSc.Random().create(comm=geo.comm))
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
+        self.piecewise_linear = all(p.law != "power" for p in parts)
 
     def add_residual(self, F: PETSc.Vec) -> float:
         """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""
@@ -134,6 +136,17 @@ class ContactTerm:
         if changed:
             self._last = values.copy()
         return changed
+
+    def fingerprint(self) -> bytes:
+        """This rank's part of the last assembled C's fingerprint (it identifies the active set)."""
+        return b"" if self._last is None else self._last.tobytes()
+
+    def active_set_at(self) -> bytes:
+        """This rank's fingerprint of the active set at the current u, C assembled there (the last one recorded
+        is left as it is: the next :meth:`assemble_jacobian` compares with it)."""
+        assemble_without_diagonal(self.C, self.jacobian_form, self.bcs)
+        self.C.mult(self._probe, self._print)
+        return self._print.array_r.tobytes()
 
     def forget(self) -> None:
         """Treat the next Jacobian as new (after a restart: the matrix must be rebuilt)."""

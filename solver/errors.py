@@ -23,6 +23,7 @@ _STATUS = {
     "DIVERGED_FNORM_NAN": "diverged",
     "DIVERGED_STAGNATION": "stagnated",
     "DIVERGED_MAX_IT": "too_many_iterations",
+    "DIVERGED_ACTIVE_SET_CYCLE": "too_many_iterations",  # stopped early: a cycle would run to max_it
 }
 
 
