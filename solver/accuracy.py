@@ -309,27 +309,30 @@ def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, 
     return p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1)
 
 
-def _zeta_runs(path, overrides, comm, geos, kept: dict) -> list[_Pilot] | None:
-    """Runs at the same step on nested meshes (the time error cancels in their differences); None without damage.
-    If Newton fails on one, all are repeated with half the step. ``kept``: runs already made, by (mesh, step)."""
+def _uniform(geo):
+    """``geo`` refined uniformly (every owned cell marked)."""
+    from .adapt import refine
+
+    return refine(geo, np.arange(geo.mesh.topology.index_map(geo.mesh.topology.dim).size_local))
+
+
+def _zeta_runs(path, overrides, comm, geos, kept: dict) -> list[_Pilot]:
+    """Runs at the same step on nested meshes (the time error cancels in their differences) of a scene with
+    damage. If Newton fails on one, all are repeated with half the step. ``kept``: runs already made, by (mesh,
+    step)."""
     k = _load(path, overrides).time.k
     for halving in range(4):
         step = k / 2**halving
         over = [*overrides, f"time.k={step!r}"]
         try:
-            runs = []
             for geo in geos:
-                key = (id(geo), step)
-                if key not in kept:
-                    kept[key] = _Pilot(path, over, comm, geo)
-                runs.append(kept[key])
-                if not runs[0].zeta:
-                    return None
-            return runs
+                if (id(geo), step) not in kept:
+                    kept[id(geo), step] = _Pilot(path, over, comm, geo)
+            return [kept[id(geo), step] for geo in geos]
         except SolveFailure:
             if halving == 3:
                 raise
-    return None
+    raise AssertionError("unreachable: the last halving re-raises")
 
 
 def _zeta_difference(coarse: _Pilot, fine: _Pilot, comm: MPI.Comm) -> float:
@@ -380,20 +383,13 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
       rate of 1 in h, at most 1, P1's rate of 2 in h), and e = D_bc / ((N_c / N_b)^s - 1);
     - one: s = 1/2 (rho = sqrt(N_b / N_c), e = D rho / (1 - rho));
     - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
-    ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate and the uniform refinement (or
-    None)."""
-    from .adapt import refine
-
-    finer = None
-    if earlier:
-        meshes = [*earlier[-2:], geo]
-    else:
-        tdim = geo.mesh.topology.dim
-        finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
-        meshes = [geo, finer]
+    ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate (0 without damage: nothing is run)
+    and the uniform refinement (or None)."""
+    if not _load(path, overrides).damage.enabled:
+        return 0.0, None
+    finer = None if earlier else _uniform(geo)
+    meshes = [*earlier[-2:], geo] if earlier else [geo, finer]
     runs = _zeta_runs(path, overrides, comm, meshes, {} if kept is None else kept)
-    if runs is None:
-        return 0.0, finer
     cells = [m.num_cells() for m in meshes]
     if finer is not None:
         return 2.0 * _zeta_difference(runs[0], runs[1], comm), finer
@@ -406,7 +402,6 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
 
 def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
-    from .adapt import refine
     from .geometry import build
 
     t_start = time.perf_counter()
@@ -504,8 +499,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     log(f"  zeta's space error on it <= {zeta_space:.3e}")
     while best["estimate"] * max(g, 1.0) + zeta_space > share_s:
         if finer is None:
-            tdim = geo.mesh.topology.dim
-            finer = refine(geo, np.arange(geo.mesh.topology.index_map(tdim).size_local))
+            finer = _uniform(geo)
         if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
             raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)",
                                  target=share_s - best["estimate"] * max(g, 1.0))

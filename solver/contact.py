@@ -126,11 +126,15 @@ class ContactTerm:
         fpetsc.set_bc(F, self.bcs, scale=0.0)
         return F.norm()
 
-    def assemble_jacobian(self) -> bool:
-        """Assemble C at the current u; True if the active set (C) changed since the last call."""
+    def _fingerprint_at(self) -> np.ndarray:
+        """C assembled at the current u, and this rank's part of its fingerprint C r (a view: copy to keep it)."""
         assemble_without_diagonal(self.C, self.jacobian_form, self.bcs)
         self.C.mult(self._probe, self._print)
-        values = self._print.array_r
+        return self._print.array_r
+
+    def assemble_jacobian(self) -> bool:
+        """Assemble C at the current u; True if the active set (C) changed since the last call."""
+        values = self._fingerprint_at()
         changed = self._last is None or not np.array_equal(values, self._last)
         changed = self.comm.allreduce(changed, op=MPI.LOR)
         if changed:
@@ -144,9 +148,7 @@ class ContactTerm:
     def active_set_at(self) -> bytes:
         """This rank's fingerprint of the active set at the current u, C assembled there (the last one recorded
         is left as it is: the next :meth:`assemble_jacobian` compares with it)."""
-        assemble_without_diagonal(self.C, self.jacobian_form, self.bcs)
-        self.C.mult(self._probe, self._print)
-        return self._print.array_r.tobytes()
+        return self._fingerprint_at().tobytes()
 
     def forget(self) -> None:
         """Treat the next Jacobian as new (after a restart: the matrix must be rebuilt)."""

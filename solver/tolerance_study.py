@@ -290,11 +290,16 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
     return result
 
 
+def _ref_tol(reference: dict, result: dict) -> float:
+    """The reference tolerance a scene was measured against: its own, or the study's (older files have none)."""
+    return reference.get("ref_tol", result["ref_tol"])
+
+
 def _write(result: dict, out: Path) -> None:
     rows, unreached = [], []
     for name, sc in result["scenes"].items():
         if "failure" in sc["reference"]:
-            at = sc["reference"].get("ref_tol", result["ref_tol"])
+            at = _ref_tol(sc["reference"], result)
             unreached.append((name, None, f"no reference at {at:g}: " + sc["reference"]["failure"]))
         for r in sc["runs"]:
             if "out_of_reach" in r:
@@ -303,7 +308,7 @@ def _write(result: dict, out: Path) -> None:
             b = r["uniform_best"] or {}
             own = sc["reference"].get("second_vs_first")
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
-                         "ref_tol": sc["reference"].get("ref_tol", result["ref_tol"]),
+                         "ref_tol": _ref_tol(sc["reference"], result),
                          "ref_error_over_tol": own / r["tolerance"] if own is not None else None,
                          "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
                          "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],
@@ -344,8 +349,8 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         r = sc["reference"]
         if "failure" in r:
             continue
-        own = "" if r.get("ref_tol", result["ref_tol"]) == result["ref_tol"] else " (this scene's own)"
-        lines.append(f"| {name} | {r.get('ref_tol', result['ref_tol']):g}{own} | {r['cells']} | {r['dofs']} | {r['k']:g} "
+        own = "" if _ref_tol(r, result) == result["ref_tol"] else " (this scene's own)"
+        lines.append(f"| {name} | {_ref_tol(r, result):g}{own} | {r['cells']} | {r['dofs']} | {r['k']:g} "
                      f"| {r['estimate']:.2e} "
                      f"| {r['second_vs_first']:.2e} | {r['seconds']:.1f} |")
     n = len(rows)
