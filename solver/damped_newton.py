@@ -11,6 +11,7 @@ phi'(lam) = F(x + lam d).d, nondecreasing in lam, so only residuals are evaluate
 round-off: its parts are O(1/mu) larger than its decrease). Plain Newton can instead cycle between active
 sets when 1/mu is large and the contact facets small; descent on a convex energy cannot. A full step whose
 end has the same active set as its start lies on one quadratic piece of E and is exact: it is taken as is.
+The step-size test of convergence is given the full Newton step |d|, never the damped lam |d|.
 """
 
 from __future__ import annotations
@@ -131,7 +132,10 @@ def _iterate(problem, ksp, x, max_it, converged, project, F, d, y) -> DampedResu
                 contact.forget()  # J was assembled at the full step: rebuild it at the new iterate
             _along(y, lam, d, x, bcs, project)
         y.copy(x)
-        snorm = lam * d.norm()
+        # the convergence test gets the Newton step, not the damped one: a line search that stops a step at a
+        # kink of E near its start (lam ~ 1e-6 with 1/mu ~ 1e10) moves x by less than rtol |x| while F is far
+        # from 0, and "the step is below rtol |x|" must not read that as converged
+        snorm = d.norm()
         problem.evaluate(x, F)
         out.history.append(F.norm())
     out.reason = R.DIVERGED_MAX_IT
