@@ -28,7 +28,13 @@ start mesh, the measured rates of adapted meshes (error ~ dofs^-0.49 for P1, dof
 P2, ``study estimator``) extrapolate the dofs each needs, and the cost per dof and step is
 measured (P2 is 1.13x P1 at equal dofs, benchmarks/results/bench.md). The t = 0 solves use the
 scene without memory and damage (level 0 is the elastic contact problem, which neither
-touches), which is cheaper to build. The order in time is 2 where the scene
+touches), which is cheaper to build. The damage's degree follows the displacement's
+(P2 u: P2 zeta): zeta's source is a function of eps(u), of degree 2 (p - 1) in a cell, and
+where zeta has a front (clipped at zeta*, configs/hard.toml) P1 zeta converged only like h,
+so that the damage's part forced uniform refinements (planning ~90 s at TOL 1e-2); P2 zeta
+there converges like h^2.2 and costs little per step (the memory rule of P2/P2, degree 4, has
+the 6 points of P2/P1's degree 3). On Example 1's 938-cell plan for 1e-3 the damage's
+estimate falls from 2.7e-4 (P1 zeta) to 4.6e-5. The order in time is 2 where the scene
 allows it (the same cost per step, far fewer steps), else 1. The mesh is then fixed for the
 run: no history moves between meshes.
 """
@@ -54,9 +60,12 @@ ADAPTED_RATE = {1: 0.49, 2: 1.02}  # error ~ dofs^-rate on Dörfler-adapted mesh
 GROWTH_AT_0 = 1.5  # eta growing more over the run: adapt to its largest level instead of t = 0
 THETA_MAX = 0.95  # the largest Dörfler fraction (far from the target)
 ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
-# zeta's error e ~ cells^-s on nested meshes: s observed, within [1/2, 1] (rate 1 to 2 in h, P1's best in L2)
-ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX = 0.5, 1.0
-CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "time.order")
+# zeta's error e ~ cells^-s on nested meshes: s observed, at least 1/2 (a rate of 1 in h) and at most the degree's
+# best rate in L2 ((q + 1) in h: s = (q + 1) / 2)
+ZETA_EXPONENT_MIN = 0.5
+ZETA_EXPONENT_MAX = {1: 1.0, 2: 1.5}
+CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "discretization.zeta_degree",
+               "time.order")
 
 
 @dataclass
@@ -79,8 +88,8 @@ class Plan:
 
     @property
     def overrides(self) -> list[str]:
-        """The scene overrides of the chosen degree, order and step (the mesh is ``geo``)."""
-        return [*self.start, f"discretization.u_degree={self.degree}", f"time.order={self.order}", f"time.k={self.k!r}"]
+        """The scene overrides of the chosen degrees, order and step (the mesh is ``geo``)."""
+        return [*self.start, *degrees(self.degree), f"time.order={self.order}", f"time.k={self.k!r}"]
 
     def time_error(self, t: float) -> float:
         ts, es = self.time_profile
@@ -88,15 +97,21 @@ class Plan:
         return float(es[max(i, 0)]) if len(es) else 0.0
 
     def summary(self) -> dict:
-        return {"tolerance": self.tolerance, "u_degree": self.degree, "order": self.order, "k": self.k,
+        return {"tolerance": self.tolerance, "u_degree": self.degree, "zeta_degree": self.degree, "order": self.order,
+                "k": self.k,
                 "cells": self.geo.num_cells(), "estimate": self.estimate, "C": self.C, "growth": self.growth,
                 "time_rate": self.time_rate,
                 "adaptation": [{k: v for k, v in r.items() if not k.startswith("_")} for r in self.adaptation],
                 "planning_seconds": self.seconds}
 
 
+def degrees(d: int) -> list[str]:
+    """The overrides of degree ``d`` for u and zeta alike: zeta's degree follows u's (module docstring)."""
+    return [f"discretization.u_degree={d}", f"discretization.zeta_degree={d}"]
+
+
 def contradicting(overrides: list[str]) -> list[str]:
-    """The ``--set`` overrides a tolerance decides itself (mesh size, step, degree, order)."""
+    """The ``--set`` overrides a tolerance decides itself (mesh size, step, degrees, order)."""
     return [o for o in overrides if o.split("=", 1)[0].strip() in CHOSEN_KEYS]
 
 
@@ -222,7 +237,7 @@ def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, the
         geo = refine(marked[0], np.flatnonzero(dorfler(marked[1], _theta(theta, seq[-1]["estimate"] / target), comm)))
     solved = 0
     while True:
-        lv = (level or _Level0)(path, [*overrides, f"discretization.u_degree={degree}"], comm, geo)
+        lv = (level or _Level0)(path, [*overrides, *degrees(degree)], comm, geo)
         rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                "estimate": C * lv.eta, "_geo": lv.model.geo}
         seq.append(rec)
@@ -355,16 +370,16 @@ def _zeta_difference(coarse: _Pilot, fine: _Pilot, comm: MPI.Comm) -> float:
     return worst
 
 
-def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float) -> float:
+def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float, zeta_degree: int = 1) -> float:
     """The exponent s of e(N) = A N^-s (N cells) from the differences of three nested meshes a, b, c:
     d_ab / d_bc = (N_a^-s - N_b^-s) / (N_b^-s - N_c^-s), solved for s within [ZETA_EXPONENT_MIN,
-    ZETA_EXPONENT_MAX] (a ratio outside what that range gives is clamped to its end)."""
+    ZETA_EXPONENT_MAX[zeta_degree]] (a ratio outside what that range gives is clamped to its end)."""
     na, nb, nc = (float(n) for n in cells)
 
     def model(s: float) -> float:
         return (na**-s - nb**-s) / (nb**-s - nc**-s)
 
-    lo, hi = ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX
+    lo, hi = ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX[zeta_degree]
     ratio = d_ab / d_bc if d_bc > 0 else math.inf
     if not ratio > model(lo):  # also NaN
         return lo
@@ -380,12 +395,14 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     """Estimate of zeta's space error on ``geo``, from its differences to ``earlier`` meshes that ``geo`` refines
     (the coarsest first), with e(N) = A N^-s over the number of cells N:
     - two earlier meshes a, b: s observed from the two differences (:func:`observed_exponent`: at least 1/2, a
-      rate of 1 in h, at most 1, P1's rate of 2 in h), and e = D_bc / ((N_c / N_b)^s - 1);
+      rate of 1 in h, at most (q + 1) / 2, the best rate of zeta's degree q in L2), and
+      e = D_bc / ((N_c / N_b)^s - 1);
     - one: s = 1/2 (rho = sqrt(N_b / N_c), e = D rho / (1 - rho));
     - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
     ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate (0 without damage: nothing is run)
     and the uniform refinement (or None)."""
-    if not _load(path, overrides).damage.enabled:
+    cfg = _load(path, overrides)
+    if not cfg.damage.enabled:
         return 0.0, None
     finer = None if earlier else _uniform(geo)
     meshes = [*earlier[-2:], geo] if earlier else [geo, finer]
@@ -396,7 +413,8 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     d_bc = _zeta_difference(runs[-2], runs[-1], comm)
     s = 0.5
     if len(runs) == 3:
-        s = observed_exponent(tuple(cells), _zeta_difference(runs[0], runs[1], comm), d_bc)
+        s = observed_exponent(tuple(cells), _zeta_difference(runs[0], runs[1], comm), d_bc,
+                              cfg.discretization.zeta_degree)
     return d_bc / ((cells[-1] / cells[-2]) ** s - 1.0), None
 
 
@@ -420,14 +438,14 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     Cs = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
     tol = acc.tolerance
     if acc.relative:
-        lv = _Level0(path, [*base, f"discretization.u_degree={max(acc.degrees)}"], comm, geo0)
+        lv = _Level0(path, [*base, *degrees(max(acc.degrees))], comm, geo0)
         tol = acc.tolerance * lv.strain_norm
         log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {tol:.4g}")
     share_t = (1.0 - acc.space_share) * tol
 
     # 1. on the start mesh, with the lowest degree (the time error hardly depends on it; P1 is the cheapest):
     # the step (step doubling) and how eta evolves over the run
-    pilot = [*base, f"discretization.u_degree={min(acc.degrees)}"]
+    pilot = [*base, *degrees(min(acc.degrees))]
     pilots: list[_Pilot] = []
     for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
         try:
@@ -477,7 +495,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     degree = min(acc.degrees, key=lambda d: cost[d])
     log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in acc.degrees)
         + f" -> P{degree}")
-    chosen = [*base, f"discretization.u_degree={degree}"]
+    chosen = [*base, *degrees(degree)]
 
     # 3. the mesh: adapt the chosen degree on until C eta_0 growth + zeta's part is within the space share
     target = (1.0 - ZETA_SHARE) * share_s / max(g, 1.0)
@@ -489,7 +507,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     # 4. zeta's space error on the chosen mesh, from its differences to up to two earlier meshes of the sequence
     # (each with at most a quarter of the next one's cells) or to its uniform refinement; the mesh is refined
     # uniformly while the two space parts exceed the share (the earlier runs are kept, not repeated)
-    run_k0 = [*base_full, f"discretization.u_degree={degree}"]
+    run_k0 = [*base_full, *degrees(degree)]
     chain: list = []  # the coarsest first
     for r in reversed(seqs[degree]):
         if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
@@ -515,7 +533,7 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     out = Plan(tol, degree, order, k, geo, start, estimate, Cs[degree], growth, p, (ts, profile * scale),
                [r for d in acc.degrees for r in seqs[d]])
     out.seconds = time.perf_counter() - t_start
-    log(f"chosen: P{degree}, order {order}, k = {k:g} ({round(T / k)} steps), {geo.num_cells()} cells; "
+    log(f"chosen: P{degree} (u and zeta), order {order}, k = {k:g} ({round(T / k)} steps), {geo.num_cells()} cells; "
         f"estimated error <= {sum(estimate.values()):.3e} (space {estimate['space_u'] + zeta_space:.3e}, "
         f"time {estimate['time']:.3e}) for TOL {tol:.3e}; planned in {out.seconds:.1f} s")
     return out

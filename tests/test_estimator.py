@@ -66,3 +66,46 @@ def test_dorfler_marks_the_fewest_largest_cells(comm):
     assert smallest >= largest_left
     assert chosen - smallest < 0.5 * total
     assert not dorfler(np.zeros(3), 0.5, comm).any()
+
+
+def _pressure(comm, degree: int, nx: int, uy):
+    """Example 1's square (contact on the bottom, mu = 1e-3) with u = (0, uy(x)) put in, and its estimator's
+    contact pressure lambda_h updated."""
+    scene = {"mesh": {"nx": nx, "ny": nx}, "time": {"T": 1.0, "k": 1.0}, "discretization": {"u_degree": degree},
+             "boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", "gap": 0.0, "mu": 1e-3}},
+             "memory": {"kernel": "none"}, "damage": {"enabled": False}}
+    model = build_model(from_dict(scene), comm)
+    model.u.interpolate(lambda x: np.stack([0.0 * x[0], uy(x[0])]))
+    est = estimator_for(model)
+    est.pressure.update()
+    return model, est.pressure.pressure
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_the_contact_pressure_is_the_compliance_where_that_is_in_the_trace_space(comm, degree):
+    """All of Γ_C pressed in by a u_nu of degree p: p(u_nu) = u_nu / mu is a trace of the space, and lambda_h,
+    its projection with the contact rule (exact for p psi), is it; off Γ_C lambda_h is zero."""
+    def uy(x):
+        return -(0.01 + 0.02 * x + (0.03 * x**2 if degree == 2 else 0.0))
+
+    model, lam = _pressure(comm, degree, 4, uy)
+    x = lam.function_space.tabulate_dof_coordinates()
+    bottom = np.isclose(x[:, 1], 0.0)
+    assert np.allclose(lam.x.array[bottom], -uy(x[bottom, 0]) / 1e-3, rtol=1e-10, atol=0.0)
+    assert np.all(lam.x.array[~bottom] == 0.0)
+
+
+def test_the_contact_pressure_carries_the_discrete_contact_force(comm):
+    """With the edge of the contact zone inside a facet (u_nu > 0 for x > 0.5, 5 cells across), lambda_h differs
+    from the pointwise p there, but its integral is the contact force the discrete equations carry: psi = 1 is
+    a trace of the space."""
+    from dolfinx import fem
+
+    model, lam = _pressure(comm, 2, 5, lambda x: -(0.02 * x - 0.01))
+    force = model.mech.diagnostics.contact_force()
+    total = comm.allreduce(fem.assemble_scalar(fem.form(lam * model.geo.ds(model.geo.tags["bottom"]))), op=MPI.SUM)
+    assert force > 0.0 and total == pytest.approx(force, rel=1e-10)
+    x = lam.function_space.tabulate_dof_coordinates()
+    bottom = np.isclose(x[:, 1], 0.0)
+    pointwise = np.maximum(0.02 * x[bottom, 0] - 0.01, 0.0) / 1e-3  # the law at the nodes: not what lambda_h is
+    assert np.abs(lam.x.array[bottom] - pointwise).max() > 1e-2 * pointwise.max()
