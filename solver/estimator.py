@@ -42,7 +42,29 @@ from .geometry import Geometry
 from .material import elasticity, strain
 
 
-class MemoryProjection:
+class _Projection:
+    """A field kept as the solution of a fixed SPD system A x = b(L), b reassembled from the form L at each
+    :meth:`update`; A is solved by CG to 1e-14 with the given preconditioner (both are mass matrices)."""
+
+    def _init_solver(self, A: PETSc.Mat, L: fem.Form, target: fem.Function, pc: str) -> None:
+        self.L, self.target = L, target
+        self.b = fpetsc.create_vector(L)
+        self.ksp = PETSc.KSP().create(target.function_space.mesh.comm)
+        self.ksp.setOperators(A)
+        self.ksp.setType("cg")
+        self.ksp.getPC().setType(pc)
+        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
+
+    def update(self) -> None:
+        with self.b.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(self.b, self.L)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.ksp.solve(self.b, self.target.vector)
+        self.target.x.scatter_forward()
+
+
+class MemoryProjection(_Projection):
     """Π M: the L2 projection of a quadrature-point tensor M onto discontinuous tensors of ``degree``, cell by
     cell (the mass matrix is block diagonal: one exact block-Jacobi solve)."""
 
@@ -53,29 +75,15 @@ class MemoryProjection:
         s, t = ufl.TrialFunction(S), ufl.TestFunction(S)
         A = fpetsc.assemble_matrix(fem.form(ufl.inner(s, t) * ufl.dx))
         A.assemble()
-        self.L = fem.form(ufl.inner(M, t) * dx)
-        self.b = fpetsc.create_vector(self.L)
-        self.ksp = PETSc.KSP().create(mesh.comm)
-        self.ksp.setOperators(A)
-        self.ksp.setType("cg")
-        self.ksp.getPC().setType("bjacobi")
-        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
-
-    def update(self) -> None:
-        with self.b.localForm() as local:
-            local.set(0.0)
-        fpetsc.assemble_vector(self.b, self.L)
-        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.ksp.solve(self.b, self.PM.vector)
-        self.PM.x.scatter_forward()
+        self._init_solver(A, fem.form(ufl.inner(M, t) * dx), self.PM, "bjacobi")
 
 
-class ContactPressure:
+class ContactPressure(_Projection):
     """λ_h: the contact pressure of the discrete problem, as a trace on Γ_C of the degree-p Lagrange space.
 
     (λ_h, ψ)_Γ_C = Σ_parts ∫ p(u_ν − g) ψ ds with the contact term's quadrature, for every ψ of the
     space; the boundary mass matrix (with 1 on the diagonal of the dofs off Γ_C, where λ_h = 0) is
-    factored once, so an update is one assembly and one solve pair."""
+    assembled once, so an update is one assembly and one CG solve."""
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
                  contact_degree: int | None) -> None:
@@ -94,22 +102,11 @@ class ContactPressure:
                                    bcs=[fem.dirichletbc(fem.Function(S), off)])
         A.assemble()
         qd = {} if contact_degree is None else {"quadrature_degree": contact_degree}
-        self.L = fem.form(sum(compliance(penetration(u, n, gap_function(p, mesh)), p) * psi
-                              * geo.ds(geo.tags[p.name], metadata=qd) for p in parts))
-        self.b = fpetsc.create_vector(self.L)  # zero off Γ_C: the traces of those dofs' basis functions vanish
-        self.ksp = PETSc.KSP().create(mesh.comm)
-        self.ksp.setOperators(A)
-        self.ksp.setType("cg")  # a mass matrix: Jacobi-preconditioned CG converges in a few tens of iterations
-        self.ksp.getPC().setType("jacobi")
-        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
-
-    def update(self) -> None:
-        with self.b.localForm() as local:
-            local.set(0.0)
-        fpetsc.assemble_vector(self.b, self.L)
-        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.ksp.solve(self.b, self.pressure.vector)
-        self.pressure.x.scatter_forward()
+        # b is zero off Γ_C (the traces of those dofs' basis functions vanish); Jacobi-preconditioned CG on the
+        # boundary mass matrix converges in a few tens of iterations
+        L = fem.form(sum(compliance(penetration(u, n, gap_function(p, mesh)), p) * psi
+                         * geo.ds(geo.tags[p.name], metadata=qd) for p in parts))
+        self._init_solver(A, L, self.pressure, "jacobi")
 
 
 class ResidualEstimator:
