@@ -85,10 +85,11 @@ class ContactPressure(_Projection):
     space; the boundary mass matrix (with 1 on the diagonal of the dofs off Γ_C, where λ_h = 0) is
     assembled once, so an update is one assembly and one CG solve."""
 
-    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...],
                  contact_degree: int | None) -> None:
         mesh = geo.mesh
-        S = fem.FunctionSpace(mesh, ("Lagrange", u.function_space.ufl_element().degree()))
+        degree = u.function_space.ufl_element().degree()
+        S = fem.FunctionSpace(mesh, ("Lagrange", degree))
         self.pressure = fem.Function(S, name="contact_pressure")
         lam, psi = ufl.TrialFunction(S), ufl.TestFunction(S)
         n = ufl.FacetNormal(mesh)
@@ -120,7 +121,7 @@ class ResidualEstimator:
     def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
                  boundaries: tuple[BoundaryConfig, ...], tractions: dict[str, fem.Constant], degree: int,
                  body_force: fem.Constant | None = None, memory: MemoryProjection | None = None,
-                 pressure: ContactPressure | None = None) -> None:
+                 contact_degree: int | None = None) -> None:
         mesh = geo.mesh
         self.geo = geo
         V0 = fem.FunctionSpace(mesh, ("DG", 0))
@@ -128,6 +129,8 @@ class ResidualEstimator:
         n = ufl.FacetNormal(mesh)
         h = ufl.CellDiameter(mesh)
         sigma = elasticity(strain(u), material.E, material.nu, material.model)
+        contact = tuple(p for p in boundaries if p.role == "contact")
+        pressure = ContactPressure(geo, u, contact, contact_degree) if contact else None
         self.memory, self.pressure = memory, pressure
         if memory is not None:
             sigma = sigma + memory.PM
@@ -190,13 +193,8 @@ def estimator_for(model) -> ResidualEstimator:
     memory = None
     if model.history is not None:
         memory = MemoryProjection(model.history.M, model.rule.dx, cfg.discretization.u_degree - 1)
-    contact = tuple(p for p in cfg.boundaries if p.role == "contact")
-    pressure = None
-    if contact:
-        pressure = ContactPressure(model.geo, model.u, contact, cfg.discretization.u_degree,
-                                   cfg.solver.contact_quadrature_degree)
     return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force, memory,
-                             pressure)
+                             cfg.solver.contact_quadrature_degree)
 
 
 def dorfler(eta2: np.ndarray, theta: float, comm: MPI.Comm) -> np.ndarray:
