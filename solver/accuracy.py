@@ -61,6 +61,10 @@ ADAPTED_RATE = {1: 0.49, 2: 1.02}  # error ~ dofs^-rate on Dörfler-adapted mesh
 GROWTH_AT_0 = 1.5  # eta growing more over the run: adapt to its largest level instead of t = 0
 THETA_MAX = 0.95  # the largest Dörfler fraction (far from the target)
 ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
+# zeta's part over ZETA_SHARE but at most ROOM_ZETA_MAX of the space share: u's mesh is adapted on to make room
+# (ROOM_MARGIN of zeta's part kept for its change on the new mesh) before any uniform refinement
+ROOM_ZETA_MAX = 0.6
+ROOM_MARGIN = 0.25
 # zeta's error e ~ cells^-s on nested meshes: s observed, at least 1/2 (a rate of 1 in h) and at most the degree's
 # best rate in L2 ((q + 1) in h: s = (q + 1) / 2)
 ZETA_EXPONENT_MIN = 0.5
@@ -419,6 +423,31 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     return d_bc / ((cells[-1] / cells[-2]) ** s - 1.0), None
 
 
+def _make_room(path, chosen, run_k0, comm, marked, degree: int, C: float, share: float, G: float, zeta_space: float,
+               acc, seq: list[dict], runs: dict, log, level, tol: float):
+    """A Dörfler step for u that leaves zeta's part room within the space share, instead of a uniform refinement.
+
+    On the mesh M (``marked``: its geo and eta_K^2) zeta's error is at most ``zeta_space``; u is adapted on from M
+    to C eta G <= share - (1 + ROOM_MARGIN) zeta_space, giving M' that refines M. By the triangle inequality
+    zeta's error on M' is at most zeta_space + D, with D = max over levels of ||zeta_M' - zeta_M|| (runs at the
+    same step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_space + D <= share;
+    returns (M', its eta_K^2, zeta_space + D), or None (M' is then dropped, and the caller refines M uniformly)."""
+    target = (share - (1.0 + ROOM_MARGIN) * zeta_space) / G
+    n = len(seq)
+    geo, eta2 = _adapt(path, chosen, comm, None, degree, C, target, acc.theta, acc.max_dofs, None, seq, log,
+                       marked=marked, level=level, tol=tol)
+    bound = zeta_space
+    if _load(path, run_k0).damage.enabled:
+        bound += _zeta_difference(*_zeta_runs(path, run_k0, comm, [marked[0], geo], runs), comm)
+    total = seq[-1]["estimate"] * G + bound
+    log(f"  a Dörfler step for u: {geo.num_cells()} cells, C eta = {seq[-1]['estimate']:.3e}, zeta's space error <= "
+        f"{bound:.3e}: {'taken' if total <= share else 'over the share, refined uniformly instead'}")
+    if total <= share:
+        return geo, eta2, bound
+    del seq[n:]
+    return None
+
+
 def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
     from .geometry import build
@@ -502,12 +531,13 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     target = (1.0 - ZETA_SHARE) * share_s / max(g, 1.0)
     geo, eta2 = last[degree]
     if seqs[degree][-1]["estimate"] > target:  # go on from the probe's last mesh
-        geo, _ = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
+        geo, eta2 = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
                         seqs[degree], log, marked=(geo, eta2), level=level, tol=tol)
     best = seqs[degree][-1]
     # 4. zeta's space error on the chosen mesh, from its differences to up to two earlier meshes of the sequence
-    # (each with at most a quarter of the next one's cells) or to its uniform refinement; the mesh is refined
-    # uniformly while the two space parts exceed the share (the earlier runs are kept, not repeated)
+    # (each with at most a quarter of the next one's cells) or to its uniform refinement. While the two space
+    # parts exceed the share: where zeta's part leaves room, a Dörfler step for u first (:func:`_make_room`);
+    # else (or if that step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated)
     run_k0 = [*base_full, *degrees(degree)]
     chain: list = []  # the coarsest first
     for r in reversed(seqs[degree]):
@@ -516,21 +546,30 @@ def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     runs: dict = {}
     zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
     log(f"  zeta's space error on it <= {zeta_space:.3e}")
-    while best["estimate"] * max(g, 1.0) + zeta_space > share_s:
+    G = max(g, 1.0)
+    while best["estimate"] * G + zeta_space > share_s:
+        if zeta_space <= ROOM_ZETA_MAX * share_s:
+            room = _make_room(path, chosen, run_k0, comm, (geo, eta2), degree, Cs[degree], share_s, G, zeta_space,
+                              acc, seqs[degree], runs, log, level, tol)
+            if room is not None:
+                geo, eta2, zeta_space = room
+                best = seqs[degree][-1]
+                break
         if finer is None:
             finer = _uniform(geo)
         if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
             raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)",
-                                 target=share_s - best["estimate"] * max(g, 1.0))
+                                 target=share_s - best["estimate"] * G)
         chain, geo = [*chain, geo][-2:], finer
         zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
         lv = level(path, chosen, comm, geo)
+        eta2 = lv.eta2
         best = {"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                 "estimate": Cs[degree] * lv.eta, "uniform": True}
         seqs[degree].append(best)
         log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {best['estimate']:.3e}, zeta's space error <= "
             f"{zeta_space:.3e}")
-    estimate = {"space_u": best["estimate"] * max(g, 1.0), "space_zeta": zeta_space, "time": e_k4 * scale}
+    estimate = {"space_u": best["estimate"] * G, "space_zeta": zeta_space, "time": e_k4 * scale}
     out = Plan(tol, degree, order, k, geo, start, estimate, Cs[degree], growth, p, (ts, profile * scale),
                [r for d in acc.degrees for r in seqs[d]])
     out.seconds = time.perf_counter() - t_start

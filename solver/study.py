@@ -392,6 +392,16 @@ def _scene_ref_tol(item: str):
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _scene_ref_uniform(item: str):
+    """argparse type of ``--scene-ref-uniform``: (scene, (n, steps)), or a usage error (exit 2)."""
+    from .tolerance_study import scene_ref_uniform
+
+    try:
+        return scene_ref_uniform(item)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver study", description="stability map and work-precision chart")
     sub = p.add_subparsers(dest="which", required=True)
@@ -450,6 +460,9 @@ def main(argv: list[str] | None = None) -> int:
     to.add_argument("--ref-tol", type=float, default=1e-4, help="tolerance of the P2 reference run")
     to.add_argument("--scene-ref-tol", nargs="+", metavar="NAME=TOL", default=[], type=_scene_ref_tol,
                     help="a scene's own reference tolerance where --ref-tol is out of reach (stated in the output)")
+    to.add_argument("--scene-ref-uniform", nargs="+", metavar="NAME=N:STEPS", default=[], type=_scene_ref_uniform,
+                    help="a scene's reference as a uniform P2, second-order run (n cells across, k = T/STEPS), where "
+                    "a tolerance reference is out of reach (stated in the output)")
     to.add_argument("--levels", type=int, default=6, help="uniform meshes per series (n = 4, 8, ... or r = 0, 1, ...)")
     to.add_argument("--steps", type=int, nargs="+", default=[10, 20, 40, 80], help="uniform steps per run (T / k)")
     args = p.parse_args(argv)

@@ -7,7 +7,9 @@ with :class:`reference.PointwiseError` (the adapted meshes do not nest in the re
 The reference is itself a P2, second-order tolerance run at ``ref_tol``, with a step a few
 times smaller than any judged; its own error is estimated by a second reference at
 3 ``ref_tol``. A scene whose reference at ``ref_tol`` is out of reach can be given its own
-reference tolerance (``--scene-ref-tol NAME=TOL``); the output states it per scene, and beside
+reference tolerance (``--scene-ref-tol NAME=TOL``), or a uniform P2, second-order reference on its
+rectangle (``--scene-ref-uniform NAME=N:STEPS``, its own error from one at N/2 and 2k); the
+output states it per scene, and beside
 every run the reference's own error over the run's tolerance, so a row judged against a
 coarser reference says so. The uniform runs ((P1, P2) x (order 1, 2) x meshes x steps T/10 ... T/80,
 measured against the same reference) give the cheapest uniform choice that meets each
@@ -44,22 +46,20 @@ MAX_DOFS = 300_000  # per run of the study (the tolerance runs' accuracy.max_dof
 
 
 class Reference:
-    """A tolerance run kept at every level (u, zeta) on its own adapted mesh."""
+    """A fine run kept at every level (u, zeta), on its own mesh: a tolerance run (:meth:`planned`) or a uniform
+    P2, second-order run (:meth:`uniform`, for a scene whose planned reference is out of reach)."""
 
-    def __init__(self, path: Path, overrides: list[str], tol: float, refine_k: int, log=print) -> None:
-        from .accuracy import plan
-        from .config import load
-        from .stepper import build_model, run
+    def __init__(self, path: Path, overrides: list[str], chosen: list[str], k: float, geo, what: str,
+                 estimate: float | None = None, log=print) -> None:
+        from .errors import SolveFailure
+        from .stepper import run
 
         t0 = time.perf_counter()
-        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
-                        f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
-        from .errors import SolveFailure
-
+        self.path, self.overrides, self.geo, self.estimate = path, overrides, geo, estimate
         for halving in range(3):  # a step Newton cannot take on the fine mesh is halved
-            self.k = p.k / refine_k / 2**halving
-            cfg = load(path, [*overrides, *QUIET, *p.overrides, f"time.k={self.k!r}"])
-            self.model = model = build_model(cfg, MPI.COMM_SELF, p.geo)
+            self.k = k / 2**halving
+            self.chosen = [*chosen, f"time.k={self.k!r}"]
+            self.model = model = self.build()
             self.u, self.zeta = [], []
 
             def keep(row, model=model):
@@ -73,11 +73,40 @@ class Reference:
                 if halving == 2:
                     raise
                 log(f"  reference: Newton failed at k = {self.k:g}; halving the step")
-        self.plan = p
         self.seconds = time.perf_counter() - t0
+        self.cells = model.geo.num_cells()
         self.dofs = model.u.x.array.size
-        log(f"  reference: TOL {tol:g}, P2 order {p.order}, {p.geo.num_cells()} cells ({self.dofs} dofs), k = {self.k:g}"
-            f", estimate {sum(p.estimate.values()):.2e}; {self.seconds:.1f} s")
+        log(f"  reference: {what}, {self.cells} cells ({self.dofs} dofs), k = {self.k:g}"
+            + (f", estimate {estimate:.2e}" if estimate is not None else "") + f"; {self.seconds:.1f} s")
+
+    def build(self):
+        """A new model of the reference's discretization (not yet run)."""
+        from .config import load
+        from .stepper import build_model
+
+        return build_model(load(self.path, [*self.overrides, *QUIET, *self.chosen]), MPI.COMM_SELF, self.geo)
+
+    @classmethod
+    def planned(cls, path: Path, overrides: list[str], tol: float, refine_k: int, log=print) -> Reference:
+        """A P2 tolerance run at ``tol`` with a ``refine_k`` times smaller step than the plan's."""
+        from .accuracy import plan
+
+        t0 = time.perf_counter()
+        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
+                        f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
+        ref = cls(path, overrides, p.overrides, p.k / refine_k, p.geo, f"TOL {tol:g}, P2 order {p.order}",
+                  sum(p.estimate.values()), log=log)
+        ref.seconds = time.perf_counter() - t0  # its planning too
+        return ref
+
+    @classmethod
+    def uniform(cls, path: Path, overrides: list[str], n: int, steps: int, log=print) -> Reference:
+        """P2, second order, on the scene's rectangle with n cells across its shorter side and k = T / steps."""
+        from .config import load
+
+        cfg = load(path, [*overrides, *QUIET])
+        chosen = [*_rectangle(cfg, n), "discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2"]
+        return cls(path, overrides, chosen, cfg.time.T / steps, None, f"uniform P2 order 2, n = {n}", log=log)
 
     def level(self, t: float) -> int | None:
         m = t / self.k
@@ -113,6 +142,13 @@ class Reference:
                 "levels": len(errs), "failure": failure, "dofs": int(model.u.x.array.size)}
 
 
+def _rectangle(cfg, n: int) -> list[str]:
+    """mesh.nx, mesh.ny of n cells across the rectangle's shorter side (cells about square)."""
+    (x0, y0), (x1, y1) = cfg.mesh.corners
+    short = min(x1 - x0, y1 - y0)
+    return [f"mesh.nx={round(n * (x1 - x0) / short)}", f"mesh.ny={round(n * (y1 - y0) / short)}"]
+
+
 def _uniform_meshes(path: Path, overrides: list[str], levels: int):
     """(label, overrides, geo or None) of uniform meshes: n = 4, 8, ... on a rectangle (cells about square),
     the scene's mesh refined uniformly 0, 1, ... times otherwise."""
@@ -122,11 +158,9 @@ def _uniform_meshes(path: Path, overrides: list[str], levels: int):
 
     cfg = load(path, [*overrides, *QUIET])
     if cfg.mesh.kind == "rectangle":
-        (x0, y0), (x1, y1) = cfg.mesh.corners
-        short = min(x1 - x0, y1 - y0)
         for i in range(levels):
             n = 4 * 2**i
-            yield f"n={n}", [f"mesh.nx={round(n * (x1 - x0) / short)}", f"mesh.ny={round(n * (y1 - y0) / short)}"], None
+            yield f"n={n}", _rectangle(cfg, n), None
         return
     geo = build(MPI.COMM_SELF, cfg.mesh, cfg.boundaries, cfg.dim)
     for r in range(min(levels, 3)):  # a gmsh mesh is already fine: 16x its cells at r = 2
@@ -220,87 +254,138 @@ def scene_ref_tol(item: str) -> tuple[str, float]:
     return name, tol
 
 
-def _kept(earlier: dict, tols, ref_tol: float, per_scene: dict[str, float], scenes: list[str]) -> dict:
+def scene_ref_uniform(item: str) -> tuple[str, tuple[int, int]]:
+    """One ``--scene-ref-uniform NAME=N:STEPS`` item as (scene, (n, steps)); ValueError for an unknown scene, a scene
+    not on a rectangle, or n, steps that are not even integers >= 2 (the second reference is at n / 2, steps / 2)."""
+    from .config import load
+
+    name, sep, value = item.partition("=")
+    if not sep or name not in SCENES:
+        raise ValueError(f"{item}: expected NAME=N:STEPS with NAME one of {', '.join(SCENES)}")
+    n_text, colon, steps_text = value.partition(":")
+    try:
+        n, steps = int(n_text), int(steps_text)
+    except ValueError:
+        n = steps = 0
+    if not colon or n < 2 or steps < 2 or n % 2 or steps % 2:
+        raise ValueError(f"{item}: N and STEPS must be even integers >= 2 (the second reference takes half of each)")
+    path, overrides = SCENES[name]
+    if load(path, [*overrides, *QUIET]).mesh.kind != "rectangle":
+        raise ValueError(f"{item}: a uniform reference needs a scene on a built-in rectangle, not a gmsh mesh")
+    return name, (n, steps)
+
+
+def _spec(name: str, ref_tol: float, per_scene: dict[str, float], uniform: dict[str, tuple[int, int]]) -> dict:
+    """What the study asks of a scene's reference: {"uniform": [n, steps]} or {"ref_tol": TOL}."""
+    if name in uniform:
+        return {"uniform": list(uniform[name])}
+    return {"ref_tol": per_scene.get(name, ref_tol)}
+
+
+def _kept(earlier: dict, tols, ref_tol: float, per_scene: dict[str, float], scenes: list[str],
+          uniform: dict[str, tuple[int, int]] | None = None) -> dict:
     """The scenes of an earlier tolerance.json that can be kept: same tolerances, a reference that did not fail,
-    at the reference tolerance this study asks of the scene."""
+    of the kind and at the tolerance (or uniform mesh and steps) this study asks of the scene."""
     if earlier.get("tolerances") != list(tols):
         return {}
     kept = {}
     for name, sc in earlier.get("scenes", {}).items():
         if name not in scenes or "failure" in sc["reference"]:
             continue
-        theirs = sc["reference"].get("ref_tol", earlier.get("ref_tol"))
-        if theirs == per_scene.get(name, ref_tol):
+        ref = sc["reference"]
+        theirs = {"uniform": ref["uniform"]} if "uniform" in ref else {"ref_tol": ref.get("ref_tol", earlier.get("ref_tol"))}
+        if theirs == _spec(name, ref_tol, per_scene, uniform or {}):
             kept[name] = sc
     return kept
 
 
 def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, steps, log=print,
-              per_scene: dict[str, float] | None = None) -> dict:
-    """Every scene in turn; scenes already in ``out``/tolerance.json (same tolerances and reference tolerance) are
-    kept, not redone. ``per_scene``: reference tolerances that replace ``ref_tol`` for the scenes named."""
-    per_scene = per_scene or {}
+              per_scene: dict[str, float] | None = None, uniform: dict[str, tuple[int, int]] | None = None) -> dict:
+    """Every scene in turn; scenes already in ``out``/tolerance.json (same tolerances and reference) are kept, not
+    redone. ``per_scene``: reference tolerances that replace ``ref_tol`` for the scenes named; ``uniform``: scenes
+    whose reference is a uniform run, (n, steps)."""
+    per_scene, uniform = per_scene or {}, uniform or {}
     out.mkdir(parents=True, exist_ok=True)
     result = {"tolerances": list(tols), "ref_tol": ref_tol, "scenes": {}}
     old = out / "tolerance.json"
     if old.exists():
-        result["scenes"] = _kept(json.loads(old.read_text()), tols, ref_tol, per_scene, scenes)
+        result["scenes"] = _kept(json.loads(old.read_text()), tols, ref_tol, per_scene, scenes, uniform)
     for name in scenes:
         if name in result["scenes"]:
             log(f"{name}: kept from {old}")
             continue
         path, overrides = SCENES[name]
-        tol_ref = per_scene.get(name, ref_tol)
-        log(f"{name}:" + (f" reference tolerance {tol_ref:g} (this scene's own)" if name in per_scene else ""))
-        from .config import load
+        spec = _spec(name, ref_tol, per_scene, uniform)
+        own = name in per_scene or name in uniform
+        log(f"{name}:" + (f" its own reference, {_label(spec)}" if own else ""))
         from .errors import SolveFailure, ToleranceError
-        from .stepper import build_model
 
         try:
-            ref = Reference(path, overrides, tol_ref, 4, log=log)
-            second = Reference(path, overrides, 3 * tol_ref, 2, log=log)
+            if "uniform" in spec:
+                n, n_steps = spec["uniform"]
+                ref = Reference.uniform(path, overrides, n, n_steps, log=log)
+                second = Reference.uniform(path, overrides, n // 2, n_steps // 2, log=log)
+            else:
+                ref = Reference.planned(path, overrides, spec["ref_tol"], 4, log=log)
+                second = Reference.planned(path, overrides, 3 * spec["ref_tol"], 2, log=log)
         except (ToleranceError, SolveFailure) as exc:
             log(f"  no reference: {exc}")
-            result["scenes"][name] = {"reference": {"failure": str(exc), "ref_tol": tol_ref}, "runs": [], "uniform": []}
+            result["scenes"][name] = {"reference": {"failure": str(exc), **spec}, "runs": [], "uniform": []}
             _write(result, out)
             continue
 
-        cfg2 = load(path, [*overrides, *QUIET, *second.plan.overrides, f"time.k={second.k!r}"])
-        ref_check = ref.measure(build_model(cfg2, MPI.COMM_SELF, second.plan.geo))
-        log(f"  reference at 3 x {tol_ref:g} against it: {ref_check['error']:.2e}")
-        uniform = uniform_sweep(ref, path, overrides, tols, levels, steps, log=log)
+        ref_check = ref.measure(second.build())
+        log(f"  second reference against it: {ref_check['error']:.2e}")
+        uniform_rows = uniform_sweep(ref, path, overrides, tols, levels, steps, log=log)
         runs = []
         for tol in tols:
             rec = tolerance_run(ref, path, overrides, tol, log=log)
             if "out_of_reach" in rec:
                 runs.append(rec)
                 continue
-            best = cheapest(uniform, tol)
+            best = cheapest(uniform_rows, tol)
             rec["uniform_best"] = None if best is None else {key: best[key] for key in
                                                             ("degree", "order", "mesh", "k", "error", "cost", "dofs")}
             runs.append(rec)
         result["scenes"][name] = {
-            "reference": {"ref_tol": tol_ref, "cells": ref.plan.geo.num_cells(), "dofs": ref.dofs, "k": ref.k,
-                          "estimate": sum(ref.plan.estimate.values()), "seconds": ref.seconds,
-                          "second_vs_first": ref_check["error"]},
-            "runs": runs, "uniform": uniform}
+            "reference": {**spec, "cells": ref.cells, "dofs": ref.dofs, "k": ref.k, "estimate": ref.estimate,
+                          "seconds": ref.seconds, "second_vs_first": ref_check["error"]},
+            "runs": runs, "uniform": uniform_rows}
         _write(result, out)
-        del ref, second, uniform
+        del ref, second, uniform_rows
         gc.collect()
     return result
 
 
-def _ref_tol(reference: dict, result: dict) -> float:
-    """The reference tolerance a scene was measured against: its own, or the study's (older files have none)."""
+def _ref_tol(reference: dict, result: dict) -> float | None:
+    """The reference tolerance a scene was measured against: its own, or the study's (older files have none);
+    None for a uniform reference."""
+    if "uniform" in reference:
+        return None
     return reference.get("ref_tol", result["ref_tol"])
+
+
+def _spec_of(reference: dict, result: dict) -> dict:
+    """The spec (:func:`_spec`) a scene's reference was made to."""
+    if "uniform" in reference:
+        return {"uniform": reference["uniform"]}
+    return {"ref_tol": _ref_tol(reference, result)}
+
+
+def _label(spec: dict) -> str:
+    """A reference as the output names it: its tolerance, or its uniform mesh and steps."""
+    if "uniform" in spec:
+        n, n_steps = spec["uniform"]
+        return f"uniform P2 order 2, n = {n}, k = T/{n_steps}"
+    return f"{spec['ref_tol']:g}"
 
 
 def _write(result: dict, out: Path) -> None:
     rows, unreached = [], []
     for name, sc in result["scenes"].items():
         if "failure" in sc["reference"]:
-            at = _ref_tol(sc["reference"], result)
-            unreached.append((name, None, f"no reference at {at:g}: " + sc["reference"]["failure"]))
+            at = _label(_spec_of(sc["reference"], result))
+            unreached.append((name, None, f"no reference at {at}: " + sc["reference"]["failure"]))
         for r in sc["runs"]:
             if "out_of_reach" in r:
                 unreached.append((name, r["tolerance"], r["out_of_reach"]))
@@ -309,6 +394,7 @@ def _write(result: dict, out: Path) -> None:
             own = sc["reference"].get("second_vs_first")
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
                          "ref_tol": _ref_tol(sc["reference"], result),
+                         "reference": _label(_spec_of(sc["reference"], result)),
                          "ref_error_over_tol": own / r["tolerance"] if own is not None else None,
                          "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
                          "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],
@@ -342,16 +428,19 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
                      f"| {r['cost']:.3f} | {uni} | {ucost} | {ratio} |")
     lines += ["", "References (P2, second order, a tolerance run at the reference TOL "
               f"({result['ref_tol']:g} unless a scene has its own) with a 4x smaller step; its own error: a second one "
-              "at 3x the tolerance, measured against it):", "",
-              "| scene | reference TOL | cells | dofs | k | its estimate | second reference against it | seconds |",
+              "at 3x the tolerance, measured against it. A uniform reference, for a scene whose tolerance reference "
+              "is out of reach: P2, second order, n cells across, k = T/steps; its own error: a second one at n/2 "
+              "and 2k, measured against it):", "",
+              "| scene | reference | cells | dofs | k | its estimate | second reference against it | seconds |",
               "|---|---|---|---|---|---|---|---|"]
     for name, sc in result["scenes"].items():
         r = sc["reference"]
         if "failure" in r:
             continue
         own = "" if _ref_tol(r, result) == result["ref_tol"] else " (this scene's own)"
-        lines.append(f"| {name} | {_ref_tol(r, result):g}{own} | {r['cells']} | {r['dofs']} | {r['k']:g} "
-                     f"| {r['estimate']:.2e} "
+        estimate = "—" if r.get("estimate") is None else f"{r['estimate']:.2e}"
+        lines.append(f"| {name} | {_label(_spec_of(r, result))}{own} | {r['cells']} | {r['dofs']} | {r['k']:g} "
+                     f"| {estimate} "
                      f"| {r['second_vs_first']:.2e} | {r['seconds']:.1f} |")
     n = len(rows)
     ok = sum(r["error"] <= r["tolerance"] for r in rows)
@@ -400,7 +489,7 @@ def chart(result: dict, out: Path) -> None:
 def main(args) -> int:
     out = Path(args.output)
     result = run_study(args.scenes, args.tols, out, args.ref_tol, args.levels, tuple(args.steps),
-                       per_scene=dict(args.scene_ref_tol))
+                       per_scene=dict(args.scene_ref_tol), uniform=dict(args.scene_ref_uniform))
     chart(result, out)
     print((out / "tolerance.md").read_text())
     return 0
