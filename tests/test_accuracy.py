@@ -185,3 +185,39 @@ def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatc
     assert seen and measured > 0.0
     assert seen[-1][0] >= measured, (seen[-1][0], measured)
     assert p.estimate["space_zeta"] == seen[-1][0]
+
+
+def test_where_zetas_part_leaves_room_u_is_adapted_on_instead_of_refining_uniformly(monkeypatch):
+    """Example 1 with mu = 1e-3 at TOL 3e-3: on the mesh adapted for u, zeta's part is over its 30% of the space
+    share and the sum over it; a Dörfler step for u (not a uniform refinement, which gave 1,296 cells) makes room.
+    zeta's bound on the new mesh is its bound on the coarser one plus their measured difference, and it is at least
+    the difference to the new mesh refined uniformly twice (16 times the cells)."""
+    from solver import accuracy
+    from solver.adapt import refine
+
+    lines, seen, meshes = [], [], []
+    original = accuracy._zeta_space
+
+    def spy(*a, **k):
+        meshes.append(a[3])  # the mesh zeta's part is estimated on
+        seen.append(original(*a, **k))
+        return seen[-1]
+
+    monkeypatch.setattr(accuracy, "_zeta_space", spy)
+    over = ["boundary.bottom.mu=1e-3"]
+    p = plan(SCENE, [*over, "accuracy.tolerance=3e-3"], MPI.COMM_WORLD, log=lines.append)
+    assert any(line.startswith("  a Dörfler step for u") and line.endswith("taken") for line in lines), lines
+    assert not any(r.get("uniform") for r in p.adaptation) and p.geo.num_cells() < 1296
+    assert len(seen) == 1
+    coarse = meshes[0]
+    k0 = ["time.k=0.1"]
+    runs = accuracy._zeta_runs(SCENE, [*over, *p.overrides, *k0], MPI.COMM_WORLD, [coarse, p.geo], {})
+    step = accuracy._zeta_difference(*runs, MPI.COMM_WORLD)
+    assert p.estimate["space_zeta"] == pytest.approx(seen[0][0] + step, rel=1e-12)
+    fine = p.geo
+    for _ in range(2):
+        fine = refine(fine, np.arange(fine.mesh.topology.index_map(2).size_local))
+    runs = accuracy._zeta_runs(SCENE, [*over, *p.overrides, *k0], MPI.COMM_WORLD, [p.geo, fine], {})
+    measured = accuracy._zeta_difference(*runs, MPI.COMM_WORLD)
+    assert 0.0 < measured <= p.estimate["space_zeta"], (measured, p.estimate)
+    assert sum(p.estimate.values()) <= 3e-3

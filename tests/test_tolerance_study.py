@@ -1,14 +1,16 @@
-"""study tolerance: a scene's own reference tolerance (--scene-ref-tol), how it is kept and stated in the output."""
+"""study tolerance: a scene's own reference (--scene-ref-tol, --scene-ref-uniform), how it is kept and stated in the
+output."""
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 
 import pytest
 from conftest import ROOT, solver_cmd
 
-from solver.tolerance_study import _kept, _write, scene_ref_tol
+from solver.tolerance_study import _kept, _write, scene_ref_tol, scene_ref_uniform
 
 
 def test_scene_ref_tol_parses_name_and_tolerance():
@@ -70,4 +72,52 @@ def test_a_bad_scene_reference_tolerance_is_a_usage_error(tmp_path):
                          cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 2, res.stderr
     assert "--scene-ref-tol" in res.stderr and "between 0 and 1" in res.stderr and "Traceback" not in res.stderr
+    assert not out.exists()
+
+
+def test_scene_ref_uniform_parses_name_mesh_and_steps():
+    assert scene_ref_uniform("hard=128:320") == ("hard", (128, 320))
+
+
+@pytest.mark.parametrize("item,word", [("hard=128", "even integers"), ("hard=127:320", "even integers"),
+                                       ("hard=128:0", "even integers"), ("hard=a:b", "even integers"),
+                                       ("nope=8:20", "NAME=N:STEPS"), ("example2=8:20", "rectangle")])
+def test_scene_ref_uniform_refuses_bad_items(item, word):
+    with pytest.raises(ValueError, match=word):
+        scene_ref_uniform(item)
+
+
+def _uniform_scene():
+    sc = _scene()
+    sc["reference"]["uniform"] = [128, 320]
+    sc["reference"]["estimate"] = None
+    return sc
+
+
+def test_a_kept_scene_must_have_the_uniform_reference_asked_of_it():
+    earlier = {"tolerances": [3e-3], "ref_tol": 1e-4, "scenes": {"hard": _uniform_scene(), "example1": _scene(1e-4)}}
+    scenes = ["hard", "example1"]
+    assert set(_kept(earlier, [3e-3], 1e-4, {}, scenes, {"hard": (128, 320)})) == {"hard", "example1"}
+    assert set(_kept(earlier, [3e-3], 1e-4, {}, scenes, {"hard": (64, 320)})) == {"example1"}
+    assert set(_kept(earlier, [3e-3], 1e-4, {}, scenes)) == {"example1"}  # asked: a tolerance reference
+    assert set(_kept(earlier, [3e-3], 1e-4, {}, scenes, {"example1": (64, 160)})) == set()
+
+
+def test_the_output_names_a_uniform_reference(tmp_path):
+    result = {"tolerances": [3e-3], "ref_tol": 1e-4, "scenes": {"hard": _uniform_scene()}}
+    _write(result, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    ref_row = next(line for line in md.splitlines() if line.startswith("| hard | uniform"))
+    assert "n = 128, k = T/320 (this scene's own)" in ref_row and "| — |" in ref_row, ref_row
+    rows = list(csv.DictReader((tmp_path / "tolerance.csv").open()))
+    assert rows[0]["ref_tol"] == "" and rows[0]["reference"] == "uniform P2 order 2, n = 128, k = T/320"
+
+
+@pytest.mark.serial
+def test_a_bad_uniform_reference_is_a_usage_error(tmp_path):
+    out = tmp_path / "o"
+    res = subprocess.run(solver_cmd(["study", "tolerance", "--scene-ref-uniform", "example3=8:20", "--output", str(out)]),
+                         cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 2, res.stderr
+    assert "--scene-ref-uniform" in res.stderr and "rectangle" in res.stderr and "Traceback" not in res.stderr
     assert not out.exists()
