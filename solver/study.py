@@ -382,24 +382,15 @@ def _run_groups(fn, groups: list[tuple], jobs: int) -> list[dict]:
     return rows
 
 
-def _scene_ref_tol(item: str):
-    """argparse type of ``--scene-ref-tol``: (scene, tolerance), or a usage error (exit 2)."""
-    from .tolerance_study import scene_ref_tol
+def _usage(parse):
+    """An argparse type from a parser of one item that raises ValueError: a bad item is a usage error (exit 2)."""
+    def parse_or_usage(item: str):
+        try:
+            return parse(item)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
-    try:
-        return scene_ref_tol(item)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _scene_ref_uniform(item: str):
-    """argparse type of ``--scene-ref-uniform``: (scene, (n, steps)), or a usage error (exit 2)."""
-    from .tolerance_study import scene_ref_uniform
-
-    try:
-        return scene_ref_uniform(item)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return parse_or_usage
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -452,15 +443,15 @@ def main(argv: list[str] | None = None) -> int:
     to = sub.add_parser("tolerance", help="tolerance runs against a fine reference and the cheapest uniform choice "
                         "(issue 14)")
     from .tolerance_study import SCENES as TOL_SCENES
-    from .tolerance_study import TOLS
+    from .tolerance_study import TOLS, scene_ref_tol, scene_ref_uniform
 
     to.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
     to.add_argument("--scenes", nargs="+", default=list(TOL_SCENES), choices=list(TOL_SCENES))
     to.add_argument("--tols", type=float, nargs="+", default=list(TOLS))
     to.add_argument("--ref-tol", type=float, default=1e-4, help="tolerance of the P2 reference run")
-    to.add_argument("--scene-ref-tol", nargs="+", metavar="NAME=TOL", default=[], type=_scene_ref_tol,
+    to.add_argument("--scene-ref-tol", nargs="+", metavar="NAME=TOL", default=[], type=_usage(scene_ref_tol),
                     help="a scene's own reference tolerance where --ref-tol is out of reach (stated in the output)")
-    to.add_argument("--scene-ref-uniform", nargs="+", metavar="NAME=N:STEPS", default=[], type=_scene_ref_uniform,
+    to.add_argument("--scene-ref-uniform", nargs="+", metavar="NAME=N:STEPS", default=[], type=_usage(scene_ref_uniform),
                     help="a scene's reference as a uniform P2, second-order run (n cells across, k = T/STEPS), where "
                     "a tolerance reference is out of reach (stated in the output)")
     to.add_argument("--levels", type=int, default=6, help="uniform meshes per series (n = 4, 8, ... or r = 0, 1, ...)")

@@ -239,12 +239,18 @@ def tolerance_run(ref: Reference, path: Path, overrides: list[str], tol: float, 
     return rec
 
 
+def _scene_item(item: str, form: str) -> tuple[str, str]:
+    """(scene, value) of a ``NAME=...`` item; ValueError naming ``form`` for a missing '=' or an unknown scene."""
+    name, sep, value = item.partition("=")
+    if not sep or name not in SCENES:
+        raise ValueError(f"{item}: expected {form} with NAME one of {', '.join(SCENES)}")
+    return name, value
+
+
 def scene_ref_tol(item: str) -> tuple[str, float]:
     """One ``--scene-ref-tol NAME=TOL`` item as (scene, reference tolerance); ValueError for an unknown scene or a
     tolerance not strictly between 0 and 1."""
-    name, sep, value = item.partition("=")
-    if not sep or name not in SCENES:
-        raise ValueError(f"{item}: expected NAME=TOL with NAME one of {', '.join(SCENES)}")
+    name, value = _scene_item(item, "NAME=TOL")
     try:
         tol = float(value)
     except ValueError:
@@ -259,9 +265,7 @@ def scene_ref_uniform(item: str) -> tuple[str, tuple[int, int]]:
     not on a rectangle, or n, steps that are not even integers >= 2 (the second reference is at n / 2, steps / 2)."""
     from .config import load
 
-    name, sep, value = item.partition("=")
-    if not sep or name not in SCENES:
-        raise ValueError(f"{item}: expected NAME=N:STEPS with NAME one of {', '.join(SCENES)}")
+    name, value = _scene_item(item, "NAME=N:STEPS")
     n_text, colon, steps_text = value.partition(":")
     try:
         n, steps = int(n_text), int(steps_text)
@@ -292,9 +296,7 @@ def _kept(earlier: dict, tols, ref_tol: float, per_scene: dict[str, float], scen
     for name, sc in earlier.get("scenes", {}).items():
         if name not in scenes or "failure" in sc["reference"]:
             continue
-        ref = sc["reference"]
-        theirs = {"uniform": ref["uniform"]} if "uniform" in ref else {"ref_tol": ref.get("ref_tol", earlier.get("ref_tol"))}
-        if theirs == _spec(name, ref_tol, per_scene, uniform or {}):
+        if _spec_of(sc["reference"], earlier) == _spec(name, ref_tol, per_scene, uniform or {}):
             kept[name] = sc
     return kept
 
@@ -362,7 +364,7 @@ def _ref_tol(reference: dict, result: dict) -> float | None:
     None for a uniform reference."""
     if "uniform" in reference:
         return None
-    return reference.get("ref_tol", result["ref_tol"])
+    return reference.get("ref_tol", result.get("ref_tol"))
 
 
 def _spec_of(reference: dict, result: dict) -> dict:

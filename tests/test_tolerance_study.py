@@ -66,12 +66,14 @@ def test_the_output_states_a_scenes_own_reference_tolerance(tmp_path):
 
 
 @pytest.mark.serial
-def test_a_bad_scene_reference_tolerance_is_a_usage_error(tmp_path):
+@pytest.mark.parametrize("flag,item,words", [("--scene-ref-tol", "hard=2", "between 0 and 1"),
+                                             ("--scene-ref-uniform", "example3=8:20", "rectangle")])
+def test_a_bad_scene_reference_is_a_usage_error(tmp_path, flag, item, words):
     out = tmp_path / "o"
-    res = subprocess.run(solver_cmd(["study", "tolerance", "--scene-ref-tol", "hard=2", "--output", str(out)]),
+    res = subprocess.run(solver_cmd(["study", "tolerance", flag, item, "--output", str(out)]),
                          cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 2, res.stderr
-    assert "--scene-ref-tol" in res.stderr and "between 0 and 1" in res.stderr and "Traceback" not in res.stderr
+    assert flag in res.stderr and words in res.stderr and "Traceback" not in res.stderr
     assert not out.exists()
 
 
@@ -111,13 +113,3 @@ def test_the_output_names_a_uniform_reference(tmp_path):
     assert "n = 128, k = T/320 (this scene's own)" in ref_row and "| — |" in ref_row, ref_row
     rows = list(csv.DictReader((tmp_path / "tolerance.csv").open()))
     assert rows[0]["ref_tol"] == "" and rows[0]["reference"] == "uniform P2 order 2, n = 128, k = T/320"
-
-
-@pytest.mark.serial
-def test_a_bad_uniform_reference_is_a_usage_error(tmp_path):
-    out = tmp_path / "o"
-    res = subprocess.run(solver_cmd(["study", "tolerance", "--scene-ref-uniform", "example3=8:20", "--output", str(out)]),
-                         cwd=ROOT, capture_output=True, text=True)
-    assert res.returncode == 2, res.stderr
-    assert "--scene-ref-uniform" in res.stderr and "rectangle" in res.stderr and "Traceback" not in res.stderr
-    assert not out.exists()
