@@ -228,34 +228,6 @@ def _theta(theta: float, ratio: float) -> float:
     return min(THETA_MAX, max(theta, 1.0 - 1.0 / ratio**2))
 
 
-def _adapt(path, overrides, comm, geo, degree: int, C: float, target: float, theta: float, max_dofs: int,
-           max_steps: int | None, seq: list[dict], log, marked=None, level=None, tol: float | None = None
-           ) -> tuple[object, np.ndarray | None]:
-    """Dörfler-refine until C eta_0 <= target (or ``max_steps`` meshes solved), appending each mesh's record to
-    ``seq``; beyond ``max_dofs``, a ToleranceError for the user's ``tol`` (default: the target). ``marked``:
-    (geo, eta2) of a mesh already solved, to refine first. ``level``: what is solved on a mesh
-    (:class:`_Level0`, the default, or :class:`_Worst`). Returns the last mesh and its eta_K^2."""
-    from .adapt import refine
-    from .estimator import dorfler
-
-    if marked is not None:
-        geo = refine(marked[0], np.flatnonzero(dorfler(marked[1], _theta(theta, seq[-1]["estimate"] / target), comm)))
-    solved = 0
-    while True:
-        lv = (level or _Level0)(path, [*overrides, *degrees(degree)], comm, geo)
-        rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
-               "estimate": C * lv.eta, "_geo": lv.model.geo}
-        seq.append(rec)
-        solved += 1
-        log(f"  P{degree}: {rec['cells']} cells, {rec['dofs']} dofs, C eta = {rec['estimate']:.3e} (target {target:.3e})")
-        if rec["estimate"] <= target or (max_steps is not None and solved >= max_steps):
-            return lv.model.geo, lv.eta2
-        if rec["dofs"] > max_dofs:
-            raise ToleranceError(target if tol is None else tol, rec["estimate"], rec["dofs"], "accuracy.max_dofs",
-                                 target=target)
-        geo = refine(lv.model.geo, np.flatnonzero(dorfler(lv.eta2, _theta(theta, rec["estimate"] / target), comm)))
-
-
 class _Pilot:
     """A run on a fixed mesh that keeps u and zeta at every level (and eta_n with ``estimate``)."""
 
@@ -423,160 +395,226 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     return d_bc / ((cells[-1] / cells[-2]) ** s - 1.0), None
 
 
-def _make_room(path, chosen, run_k0, comm, marked, degree: int, C: float, share: float, G: float, zeta_space: float,
-               acc, seq: list[dict], runs: dict, log, level, tol: float):
-    """A Dörfler step for u that leaves zeta's part room within the space share, instead of a uniform refinement.
+@dataclass
+class _Step:
+    """The step the pilot runs on the start mesh choose, and what they measured."""
 
-    On the mesh M (``marked``: its geo and eta_K^2) zeta's error is at most ``zeta_space``; u is adapted on from M
-    to C eta G <= share - (1 + ROOM_MARGIN) zeta_space, giving M' that refines M. By the triangle inequality
-    zeta's error on M' is at most zeta_space + D, with D = max over levels of ||zeta_M' - zeta_M|| (runs at the
-    same step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_space + D <= share;
-    returns (M', its eta_K^2, zeta_space + D), or None (M' is then dropped, and the caller refines M uniformly)."""
-    target = (share - (1.0 + ROOM_MARGIN) * zeta_space) / G
-    n = len(seq)
-    geo, eta2 = _adapt(path, chosen, comm, None, degree, C, target, acc.theta, acc.max_dofs, None, seq, log,
-                       marked=marked, level=level, tol=tol)
-    bound = zeta_space
-    if _load(path, run_k0).damage.enabled:
-        bound += _zeta_difference(*_zeta_runs(path, run_k0, comm, [marked[0], geo], runs), comm)
-    total = seq[-1]["estimate"] * G + bound
-    log(f"  a Dörfler step for u: {geo.num_cells()} cells, C eta = {seq[-1]['estimate']:.3e}, zeta's space error <= "
-        f"{bound:.3e}: {'taken' if total <= share else 'over the share, refined uniformly instead'}")
-    if total <= share:
-        return geo, eta2, bound
-    del seq[n:]
-    return None
+    k0: float  # the pilots' coarsest step (T / N0, halved while the scheme could not take it)
+    k: float  # the chosen step, k0 / 2^j
+    rate: float  # the observed order in k
+    error: float  # the time error's bound at k
+    times: np.ndarray  # the levels of the time error's profile
+    profile: np.ndarray  # the time error at k on those levels
+    growth: float  # eta's largest level over its level 0 (the first pilot)
+    worst_t: float  # the time of that level
+
+
+class _Planner:
+    """One plan (:func:`plan`), in the module docstring's order: the step (:meth:`_step`), the degree
+    (:meth:`_degree`), u's mesh (:meth:`_mesh`) and zeta's part (:meth:`_fit_zeta`). Holds what the stages
+    share: the scene's path and overrides, the absolute tolerance, the constants C per degree, each degree's
+    sequence of solved meshes and the zeta runs already made."""
+
+    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, log) -> None:
+        from .geometry import build
+
+        self.t_start = time.perf_counter()
+        self.path, self.comm, self.log = path, comm, log
+        cfg = _load(path, overrides)
+        self.acc = acc = cfg.accuracy
+        if not acc.enabled:
+            raise ValueError("plan: the scene has no accuracy.tolerance")
+        self.start = _start_mesh(path, overrides, comm)
+        base = [*overrides, *self.start]
+        self.order = _order(path, base)
+        self.T = cfg.time.T
+        self.base = [*base, f"time.order={self.order}"]
+        self.geo0 = build(comm, _load(path, self.base).mesh, cfg.boundaries, cfg.dim)
+        two_mu = cfg.material.E / (1.0 + cfg.material.nu)
+        self.Cs = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
+        self.tol = acc.tolerance
+        if acc.relative:
+            lv = _Level0(path, [*self.base, *degrees(max(acc.degrees))], comm, self.geo0)
+            self.tol = acc.tolerance * lv.strain_norm
+            log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {self.tol:.4g}")
+        self.seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
+        self.runs: dict = {}  # zeta's runs, by (mesh, step)
+        # set by plan(): what a mesh is solved with (the t = 0 problem or coarse-step runs), eta's growth factor
+        # applied to its estimate, and the overrides of those solves
+        self.level, self.g, self.over = _Level0, 1.0, self.base
+
+    def plan(self) -> Plan:
+        step = self._step()
+        # the space parts get what the chosen step leaves of TOL (the steps are T / (N0 2^j): the time part is
+        # often far below its share)
+        share = self.tol - step.error
+        # the space estimate: the t = 0 problem times the growth, or, where eta grows more than GROWTH_AT_0 (a
+        # load that starts small), coarse-step runs to the level of largest eta (their largest eta counts)
+        at_k0 = [*self.base, f"time.k={step.k0!r}"]
+        self.over, self.level, self.g = at_k0, _Level0, step.growth
+        if step.growth > GROWTH_AT_0:
+            self.over, self.level, self.g = [*at_k0, f"time.T={step.worst_t!r}"], _Worst, 1.0
+            self.log(f"  the mesh is adapted to the level of largest eta, t = {step.worst_t:g}")
+        degree, (geo, eta2) = self._degree(share)
+        geo, eta2 = self._mesh(degree, share, geo, eta2)
+        # zeta's runs go to the scene's T at the pilots' coarsest step
+        geo, zeta_space = self._fit_zeta(degree, share, geo, eta2, [*at_k0, *degrees(degree)])
+        G = max(self.g, 1.0)
+        estimate = {"space_u": self.seqs[degree][-1]["estimate"] * G, "space_zeta": zeta_space, "time": step.error}
+        out = Plan(self.tol, degree, self.order, step.k, geo, self.start, estimate, self.Cs[degree], step.growth,
+                   step.rate, (step.times, step.profile), [r for d in self.acc.degrees for r in self.seqs[d]])
+        out.seconds = time.perf_counter() - self.t_start
+        self.log(f"chosen: P{degree} (u and zeta), order {self.order}, k = {step.k:g} ({round(self.T / step.k)} "
+                 f"steps), {geo.num_cells()} cells; estimated error <= {sum(estimate.values()):.3e} (space "
+                 f"{estimate['space_u'] + zeta_space:.3e}, time {estimate['time']:.3e}) for TOL {self.tol:.3e}; "
+                 f"planned in {out.seconds:.1f} s")
+        return out
+
+    def _step(self) -> _Step:
+        """Step doubling on the start mesh with the lowest degree (the time error hardly depends on it; P1 is the
+        cheapest), which also gives how eta evolves over the run; the largest T / (N0 2^j) whose time error is
+        within SAFETY times its share."""
+        k0 = self.T / N0
+        pilot = [*self.base, *degrees(min(self.acc.degrees))]
+        for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
+            try:
+                pilots = [_Pilot(self.path, [*pilot, f"time.k={k0 / 2**j!r}"], self.comm, self.geo0,
+                                 estimate=(j == 0)) for j in range(3)]
+                break
+            except SolveFailure:
+                k0 /= 2
+        else:
+            raise ToleranceError(self.tol, math.nan, 0, "time.k (no pilot step converged)")
+        p, e_k4, ts, profile = _time_estimate(pilots, self.order, self.comm)
+        eta = np.array(pilots[0].eta)
+        worst = int(np.argmax(eta))
+        growth = float(eta[worst] / eta[0]) if eta[0] > 0 else math.inf
+        self.log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} "
+                 f"over the run")
+        share = (1.0 - self.acc.space_share) * self.tol
+        j, k4 = 0, k0 / 4
+        while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share:
+            j += 1
+            if j > 20:
+                raise ToleranceError(self.tol, e_k4, 0, "time.k")
+        k = k0 / 2**j
+        scale = (k / k4) ** p if e_k4 > 0 else 0.0
+        return _Step(k0, k, p, e_k4 * scale, ts, profile * scale, growth, pilots[0].t[worst])
+
+    def _degree(self, share: float) -> tuple[int, tuple]:
+        """One solve of each degree on the start mesh; the one whose predicted cost per step (the dofs it needs by
+        its adapted rate, times its cost per dof) is lowest. Returns it and (mesh, eta_K^2) of its solve."""
+        last, cost = {}, {}
+        for d in self.acc.degrees:
+            last[d] = self._adapt(self.over, d, share / self.g, geo=self.geo0, max_steps=1)
+            first = self.seqs[d][0]
+            needed = first["dofs"] * max(first["estimate"] * self.g / share, 1.0) ** (1.0 / ADAPTED_RATE[d])
+            cost[d] = COST_PER_DOF[d] * needed
+        degree = min(self.acc.degrees, key=lambda d: cost[d])
+        self.log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in self.acc.degrees)
+                 + f" -> P{degree}")
+        return degree, last[degree]
+
+    def _mesh(self, degree: int, share: float, geo, eta2) -> tuple:
+        """u's mesh: adapted on from the degree's probe until C eta_0 growth is within (1 - ZETA_SHARE) of the
+        space share."""
+        target = (1.0 - ZETA_SHARE) * share / max(self.g, 1.0)
+        if self.seqs[degree][-1]["estimate"] > target:
+            geo, eta2 = self._adapt(self.over, degree, target, marked=(geo, eta2))
+        return geo, eta2
+
+    def _fit_zeta(self, degree: int, share: float, geo, eta2, run_k0: list[str]) -> tuple:
+        """zeta's space error on ``geo``, from its differences to up to two earlier meshes of the sequence (each with
+        at most a quarter of the next one's cells) or to its uniform refinement. While the two space parts exceed
+        the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
+        step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
+        mesh and zeta's bound on it."""
+        seq, C, G = self.seqs[degree], self.Cs[degree], max(self.g, 1.0)
+        chain: list = []  # the coarsest first
+        for r in reversed(seq):
+            if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
+                chain.insert(0, r["_geo"])
+        zeta_space, finer = _zeta_space(self.path, run_k0, self.comm, geo, chain, self.runs)
+        self.log(f"  zeta's space error on it <= {zeta_space:.3e}")
+        while seq[-1]["estimate"] * G + zeta_space > share:
+            if zeta_space <= ROOM_ZETA_MAX * share:
+                room = self._make_room(degree, share, run_k0, geo, eta2, zeta_space)
+                if room is not None:
+                    return room
+            if finer is None:
+                finer = _uniform(geo)
+            if finer.num_cells() * degree**2 > self.acc.max_dofs:  # 2-D: about p^2 dofs per cell
+                raise ToleranceError(self.tol, zeta_space, finer.num_cells(),
+                                     "accuracy.max_dofs (the damage's space error)", target=share - seq[-1]["estimate"] * G)
+            chain, geo = [*chain, geo][-2:], finer
+            zeta_space, finer = _zeta_space(self.path, run_k0, self.comm, geo, chain, self.runs)
+            lv = self.level(self.path, [*self.over, *degrees(degree)], self.comm, geo)
+            eta2 = lv.eta2
+            seq.append({"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
+                        "estimate": C * lv.eta, "uniform": True})
+            self.log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {seq[-1]['estimate']:.3e}, zeta's space "
+                     f"error <= {zeta_space:.3e}")
+        return geo, zeta_space
+
+    def _make_room(self, degree: int, share: float, run_k0: list[str], geo, eta2, zeta_space: float):
+        """A Dörfler step for u that leaves zeta's part room within the space share, instead of a uniform refinement.
+
+        On the mesh M (``geo``, with its eta_K^2) zeta's error is at most ``zeta_space``; u is adapted on from M to
+        C eta G <= share - (1 + ROOM_MARGIN) zeta_space, giving M' that refines M. By the triangle inequality zeta's
+        error on M' is at most zeta_space + D, with D = max over levels of ||zeta_M' - zeta_M|| (runs at the same
+        step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_space + D <= share; returns
+        (M', zeta_space + D), or None (M' is then dropped, and the caller refines M uniformly)."""
+        seq, G = self.seqs[degree], max(self.g, 1.0)
+        n = len(seq)
+        target = (share - (1.0 + ROOM_MARGIN) * zeta_space) / G
+        finer, _ = self._adapt(self.over, degree, target, marked=(geo, eta2))
+        bound = zeta_space
+        if _load(self.path, run_k0).damage.enabled:
+            bound += _zeta_difference(*_zeta_runs(self.path, run_k0, self.comm, [geo, finer], self.runs), self.comm)
+        total = seq[-1]["estimate"] * G + bound
+        self.log(f"  a Dörfler step for u: {finer.num_cells()} cells, C eta = {seq[-1]['estimate']:.3e}, zeta's "
+                 f"space error <= {bound:.3e}: {'taken' if total <= share else 'over the share, refined uniformly instead'}")
+        if total <= share:
+            return finer, bound
+        del seq[n:]
+        return None
+
+    def _adapt(self, overrides: list[str], degree: int, target: float, geo=None, max_steps: int | None = None,
+               marked: tuple | None = None) -> tuple:
+        """Dörfler-refine until C eta <= target (or ``max_steps`` meshes solved), appending each mesh's record to
+        the degree's sequence; beyond ``accuracy.max_dofs``, a ToleranceError for the user's tolerance. Starts on
+        ``geo``, or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Returns
+        the last mesh and its eta_K^2."""
+        from .adapt import refine
+        from .estimator import dorfler
+
+        seq, C, acc = self.seqs[degree], self.Cs[degree], self.acc
+
+        def refined(mesh, eta2):
+            return refine(mesh, np.flatnonzero(dorfler(eta2, _theta(acc.theta, seq[-1]["estimate"] / target),
+                                                       self.comm)))
+
+        if marked is not None:
+            geo = refined(*marked)
+        solved = 0
+        while True:
+            lv = self.level(self.path, [*overrides, *degrees(degree)], self.comm, geo)
+            rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
+                   "estimate": C * lv.eta, "_geo": lv.model.geo}
+            seq.append(rec)
+            solved += 1
+            self.log(f"  P{degree}: {rec['cells']} cells, {rec['dofs']} dofs, C eta = {rec['estimate']:.3e} "
+                     f"(target {target:.3e})")
+            if rec["estimate"] <= target or (max_steps is not None and solved >= max_steps):
+                return lv.model.geo, lv.eta2
+            if rec["dofs"] > acc.max_dofs:
+                raise ToleranceError(self.tol, rec["estimate"], rec["dofs"], "accuracy.max_dofs", target=target)
+            geo = refined(lv.model.geo, lv.eta2)
 
 
 def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
     """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
-    from .geometry import build
-
-    t_start = time.perf_counter()
-    cfg = _load(path, overrides)
-    acc = cfg.accuracy
-    if not acc.enabled:
-        raise ValueError("plan: the scene has no accuracy.tolerance")
-    start = _start_mesh(path, overrides, comm)
-    base = [*overrides, *start]
-    order = _order(path, base)
-    T = cfg.time.T
-    k0 = T / N0
-    base = [*base, f"time.order={order}"]
-    geo0 = build(comm, _load(path, base).mesh, cfg.boundaries, cfg.dim)
-    two_mu = cfg.material.E / (1.0 + cfg.material.nu)
-    Cs = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
-    tol = acc.tolerance
-    if acc.relative:
-        lv = _Level0(path, [*base, *degrees(max(acc.degrees))], comm, geo0)
-        tol = acc.tolerance * lv.strain_norm
-        log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {tol:.4g}")
-    share_t = (1.0 - acc.space_share) * tol
-
-    # 1. on the start mesh, with the lowest degree (the time error hardly depends on it; P1 is the cheapest):
-    # the step (step doubling) and how eta evolves over the run
-    pilot = [*base, *degrees(min(acc.degrees))]
-    pilots: list[_Pilot] = []
-    for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
-        try:
-            pilots = [_Pilot(path, [*pilot, f"time.k={k0 / 2**j!r}"], comm, geo0, estimate=(j == 0))
-                      for j in range(3)]
-            break
-        except SolveFailure:
-            k0 /= 2
-    else:
-        raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
-    p, e_k4, ts, profile = _time_estimate(pilots, order, comm)
-    eta = np.array(pilots[0].eta)
-    worst = int(np.argmax(eta))
-    growth = float(eta[worst] / eta[0]) if eta[0] > 0 else math.inf
-    log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} over the run")
-    j = 0
-    k4 = k0 / 4
-    while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share_t:
-        j += 1
-        if j > 20:
-            raise ToleranceError(tol, e_k4, 0, "time.k")
-    k = k0 / 2**j
-    scale = (k / k4) ** p if e_k4 > 0 else 0.0
-    # the space parts get what the chosen step leaves of TOL (the steps are T / (N0 2^j): the time part is
-    # often far below its share)
-    share_s = tol - e_k4 * scale
-    base_full = [*base, f"time.k={k0!r}"]
-    # the space estimate: the t = 0 problem times the growth, or, where eta grows more than GROWTH_AT_0 (a load
-    # that starts small), coarse-step runs to the level of largest eta (their largest eta counts)
-    base = [*base, f"time.k={k0!r}"]
-    level, g = _Level0, growth
-    if growth > GROWTH_AT_0:
-        level, g = _Worst, 1.0
-        base = [*base, f"time.T={pilots[0].t[worst]!r}"]
-        log(f"  the mesh is adapted to the level of largest eta, t = {pilots[0].t[worst]:g}")
-
-    # 2. the degree: one solve of each on the start mesh; the dofs each needs by the adapted rate
-    seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
-    last: dict[int, tuple] = {}
-    cost = {}
-    for d in acc.degrees:
-        last[d] = _adapt(path, base, comm, geo0, d, Cs[d], share_s / g, acc.theta, acc.max_dofs, 1, seqs[d], log,
-                         level=level, tol=tol)
-        first = seqs[d][0]
-        needed = first["dofs"] * max(first["estimate"] * g / share_s, 1.0) ** (1.0 / ADAPTED_RATE[d])
-        cost[d] = COST_PER_DOF[d] * needed
-    degree = min(acc.degrees, key=lambda d: cost[d])
-    log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in acc.degrees)
-        + f" -> P{degree}")
-    chosen = [*base, *degrees(degree)]
-
-    # 3. the mesh: adapt the chosen degree on until C eta_0 growth + zeta's part is within the space share
-    target = (1.0 - ZETA_SHARE) * share_s / max(g, 1.0)
-    geo, eta2 = last[degree]
-    if seqs[degree][-1]["estimate"] > target:  # go on from the probe's last mesh
-        geo, eta2 = _adapt(path, chosen, comm, None, degree, Cs[degree], target, acc.theta, acc.max_dofs, None,
-                        seqs[degree], log, marked=(geo, eta2), level=level, tol=tol)
-    best = seqs[degree][-1]
-    # 4. zeta's space error on the chosen mesh, from its differences to up to two earlier meshes of the sequence
-    # (each with at most a quarter of the next one's cells) or to its uniform refinement. While the two space
-    # parts exceed the share: where zeta's part leaves room, a Dörfler step for u first (:func:`_make_room`);
-    # else (or if that step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated)
-    run_k0 = [*base_full, *degrees(degree)]
-    chain: list = []  # the coarsest first
-    for r in reversed(seqs[degree]):
-        if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
-            chain.insert(0, r["_geo"])
-    runs: dict = {}
-    zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
-    log(f"  zeta's space error on it <= {zeta_space:.3e}")
-    G = max(g, 1.0)
-    while best["estimate"] * G + zeta_space > share_s:
-        if zeta_space <= ROOM_ZETA_MAX * share_s:
-            room = _make_room(path, chosen, run_k0, comm, (geo, eta2), degree, Cs[degree], share_s, G, zeta_space,
-                              acc, seqs[degree], runs, log, level, tol)
-            if room is not None:
-                geo, eta2, zeta_space = room
-                best = seqs[degree][-1]
-                break
-        if finer is None:
-            finer = _uniform(geo)
-        if finer.num_cells() * degree**2 > acc.max_dofs:  # 2-D: about p^2 dofs per cell
-            raise ToleranceError(tol, zeta_space, finer.num_cells(), "accuracy.max_dofs (the damage's space error)",
-                                 target=share_s - best["estimate"] * G)
-        chain, geo = [*chain, geo][-2:], finer
-        zeta_space, finer = _zeta_space(path, run_k0, comm, geo, chain, runs)
-        lv = level(path, chosen, comm, geo)
-        eta2 = lv.eta2
-        best = {"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
-                "estimate": Cs[degree] * lv.eta, "uniform": True}
-        seqs[degree].append(best)
-        log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {best['estimate']:.3e}, zeta's space error <= "
-            f"{zeta_space:.3e}")
-    estimate = {"space_u": best["estimate"] * G, "space_zeta": zeta_space, "time": e_k4 * scale}
-    out = Plan(tol, degree, order, k, geo, start, estimate, Cs[degree], growth, p, (ts, profile * scale),
-               [r for d in acc.degrees for r in seqs[d]])
-    out.seconds = time.perf_counter() - t_start
-    log(f"chosen: P{degree} (u and zeta), order {order}, k = {k:g} ({round(T / k)} steps), {geo.num_cells()} cells; "
-        f"estimated error <= {sum(estimate.values()):.3e} (space {estimate['space_u'] + zeta_space:.3e}, "
-        f"time {estimate['time']:.3e}) for TOL {tol:.3e}; planned in {out.seconds:.1f} s")
-    return out
+    return _Planner(path, overrides, comm, log).plan()
 
 
 class ErrorSensor:
