@@ -65,6 +65,20 @@ def test_the_output_states_a_scenes_own_reference_tolerance(tmp_path):
     assert back["scenes"]["hard"]["reference"]["ref_tol"] == 1e-3
 
 
+def test_the_output_gives_the_cost_ratio_with_and_without_planning(tmp_path):
+    """cost / uniform counts planning and loop, loop / uniform the loop alone; each has its count below the table."""
+    scene = _scene(1e-4)
+    scene["runs"][0]["uniform_best"] = {"degree": 2, "order": 1, "mesh": "n=8", "k": 0.1, "error": 2e-3, "cost": 0.2}
+    _write({"tolerances": [3e-3], "ref_tol": 1e-4, "scenes": {"example1": scene}}, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    row = next(line for line in md.splitlines() if line.startswith("| example1 | 0.003 |"))
+    assert row.endswith("| 3.00 | 0.50 |"), row  # (0.5 + 0.1) / 0.2 and 0.1 / 0.2
+    assert ("Cost within 2x of the cheapest uniform choice: 0 of 1 (planning + loop); the loop alone: 1 of 1 "
+            "(0 with no uniform choice") in md
+    header = (tmp_path / "tolerance.csv").read_text().splitlines()[0].split(",")
+    assert "cost_ratio" in header and "loop_ratio" in header
+
+
 @pytest.mark.serial
 @pytest.mark.parametrize("flag,item,words", [("--scene-ref-tol", "hard=2", "between 0 and 1"),
                                              ("--scene-ref-uniform", "example3=8:20", "rectangle")])
