@@ -443,6 +443,11 @@ class _Planner:
         # applied to its estimate, and the overrides of those solves
         self.level, self.g, self.over = _Level0, 1.0, self.base
 
+    @property
+    def G(self) -> float:
+        """The factor on u's estimate for its largest level: eta's growth over the run, at least 1."""
+        return max(self.g, 1.0)
+
     def plan(self) -> Plan:
         step = self._step()
         # the space parts get what the chosen step leaves of TOL (the steps are T / (N0 2^j): the time part is
@@ -459,8 +464,7 @@ class _Planner:
         geo, eta2 = self._mesh(degree, share, geo, eta2)
         # zeta's runs go to the scene's T at the pilots' coarsest step
         geo, zeta_space = self._fit_zeta(degree, share, geo, eta2, [*at_k0, *degrees(degree)])
-        G = max(self.g, 1.0)
-        estimate = {"space_u": self.seqs[degree][-1]["estimate"] * G, "space_zeta": zeta_space, "time": step.error}
+        estimate = {"space_u": self.seqs[degree][-1]["estimate"] * self.G, "space_zeta": zeta_space, "time": step.error}
         out = Plan(self.tol, degree, self.order, step.k, geo, self.start, estimate, self.Cs[degree], step.growth,
                    step.rate, (step.times, step.profile), [r for d in self.acc.degrees for r in self.seqs[d]])
         out.seconds = time.perf_counter() - self.t_start
@@ -518,7 +522,7 @@ class _Planner:
     def _mesh(self, degree: int, share: float, geo, eta2) -> tuple:
         """u's mesh: adapted on from the degree's probe until C eta_0 growth is within (1 - ZETA_SHARE) of the
         space share."""
-        target = (1.0 - ZETA_SHARE) * share / max(self.g, 1.0)
+        target = (1.0 - ZETA_SHARE) * share / self.G
         if self.seqs[degree][-1]["estimate"] > target:
             geo, eta2 = self._adapt(self.over, degree, target, marked=(geo, eta2))
         return geo, eta2
@@ -529,7 +533,7 @@ class _Planner:
         the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
         step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
         mesh and zeta's bound on it."""
-        seq, C, G = self.seqs[degree], self.Cs[degree], max(self.g, 1.0)
+        seq, C, G = self.seqs[degree], self.Cs[degree], self.G
         chain: list = []  # the coarsest first
         for r in reversed(seq):
             if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
@@ -564,7 +568,7 @@ class _Planner:
         error on M' is at most zeta_space + D, with D = max over levels of ||zeta_M' - zeta_M|| (runs at the same
         step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_space + D <= share; returns
         (M', zeta_space + D), or None (M' is then dropped, and the caller refines M uniformly)."""
-        seq, G = self.seqs[degree], max(self.g, 1.0)
+        seq, G = self.seqs[degree], self.G
         n = len(seq)
         target = (share - (1.0 + ROOM_MARGIN) * zeta_space) / G
         finer, _ = self._adapt(self.over, degree, target, marked=(geo, eta2))

@@ -415,6 +415,10 @@ def _write(result: dict, out: Path) -> None:
     (out / "tolerance.md").write_text(markdown(result, rows, unreached))
 
 
+def _or_dash(value: float | None, spec: str) -> str:
+    return "—" if value is None else format(value, spec)
+
+
 def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     lines = ["# Tolerance runs against a fine reference (`python -m solver study tolerance`)", "",
              "| scene | TOL | achieved error | error / TOL | reference's own error / TOL | estimate | chosen | cost (s) "
@@ -424,11 +428,10 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         own = r.get("ref_error_over_tol")
         uni = (f"P{r['uniform_degree']} o{r['uniform_order']} {r['uniform_mesh']} k={r['uniform_k']:g} "
                f"({r['uniform_error']:.2e})" if r["uniform_cost"] is not None else "none in the sweep")
-        ratio = f"{r['cost_ratio']:.2f}" if r["cost_ratio"] is not None else "—"
-        loop = f"{r['loop_ratio']:.2f}" if r.get("loop_ratio") is not None else "—"
-        ucost = f"{r['uniform_cost']:.3f}" if r["uniform_cost"] is not None else "—"
+        ratio, loop, ucost = (_or_dash(r[key], spec) for key, spec in
+                              (("cost_ratio", ".2f"), ("loop_ratio", ".2f"), ("uniform_cost", ".3f")))
         lines.append(f"| {r['scene']} | {r['tolerance']:g} | {r['error']:.2e} | {r['error_over_tol']:.2f} "
-                     f"| {'—' if own is None else f'{own:.2f}'} | {r['estimate']:.2e} "
+                     f"| {_or_dash(own, '.2f')} | {r['estimate']:.2e} "
                      f"| P{r['degree']} o{r['order']} k={r['k']:g}, {r['cells']} cells "
                      f"| {r['cost']:.3f} | {uni} | {ucost} | {ratio} | {loop} |")
     lines += ["", "References (P2, second order, a tolerance run at the reference TOL "
@@ -443,7 +446,7 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         if "failure" in r:
             continue
         own = "" if _ref_tol(r, result) == result["ref_tol"] else " (this scene's own)"
-        estimate = "—" if r.get("estimate") is None else f"{r['estimate']:.2e}"
+        estimate = _or_dash(r.get("estimate"), ".2e")
         lines.append(f"| {name} | {_label(_spec_of(r, result))}{own} | {r['cells']} | {r['dofs']} | {r['k']:g} "
                      f"| {estimate} "
                      f"| {r['second_vs_first']:.2e} | {r['seconds']:.1f} |")
@@ -451,7 +454,7 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     ok = sum(r["error"] <= r["tolerance"] for r in rows)
     tight = sum(r["error"] >= 0.2 * r["tolerance"] for r in rows)
     within = sum(r["cost_ratio"] is not None and r["cost_ratio"] <= 2 for r in rows)
-    loops = sum(r.get("loop_ratio") is not None and r["loop_ratio"] <= 2 for r in rows)
+    loops = sum(r["loop_ratio"] is not None and r["loop_ratio"] <= 2 for r in rows)
     none = sum(r["cost_ratio"] is None for r in rows)
     if unreached:
         lines += ["", f"Not measured: a reference or a plan that failed (a Newton failure is a failed solve, exit 1, "
