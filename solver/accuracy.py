@@ -301,13 +301,6 @@ def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, 
     return p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1)
 
 
-def _uniform(geo):
-    """``geo`` refined uniformly (every owned cell marked)."""
-    from .adapt import refine
-
-    return refine(geo, np.arange(geo.mesh.topology.index_map(geo.mesh.topology.dim).size_local))
-
-
 def _zeta_runs(path, overrides, comm, geos, kept: dict) -> list[_Pilot]:
     """Runs at the same step on nested meshes (the time error cancels in their differences) of a scene with
     damage. If Newton fails on one, all are repeated with half the step. ``kept``: runs already made, by (mesh,
@@ -378,10 +371,12 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
     ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate (0 without damage: nothing is run)
     and the uniform refinement (or None)."""
+    from .adapt import refine_uniformly
+
     cfg = _load(path, overrides)
     if not cfg.damage.enabled:
         return 0.0, None
-    finer = None if earlier else _uniform(geo)
+    finer = None if earlier else refine_uniformly(geo)
     meshes = [*earlier[-2:], geo] if earlier else [geo, finer]
     runs = _zeta_runs(path, overrides, comm, meshes, {} if kept is None else kept)
     cells = [m.num_cells() for m in meshes]
@@ -533,6 +528,8 @@ class _Planner:
         the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
         step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
         mesh and zeta's bound on it."""
+        from .adapt import refine_uniformly
+
         seq, C, G = self.seqs[degree], self.Cs[degree], self.G
         chain: list = []  # the coarsest first
         for r in reversed(seq):
@@ -546,7 +543,7 @@ class _Planner:
                 if room is not None:
                     return room
             if finer is None:
-                finer = _uniform(geo)
+                finer = refine_uniformly(geo)
             if finer.num_cells() * degree**2 > self.acc.max_dofs:  # 2-D: about p^2 dofs per cell
                 raise ToleranceError(self.tol, zeta_space, finer.num_cells(),
                                      "accuracy.max_dofs (the damage's space error)", target=share - seq[-1]["estimate"] * G)

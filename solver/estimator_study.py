@@ -86,7 +86,7 @@ def adapted_series(cfg_path: Path, degree: int, theta: float, max_dofs: int, n0:
     from dolfinx.fem import petsc as fpetsc
     from mpi4py import MPI
 
-    from .adapt import refine
+    from .adapt import refine, refine_uniformly
     from .config import load
     from .estimator import dorfler, estimator_for
     from .reference import _petsc_to_scipy, interpolation_matrix
@@ -109,7 +109,7 @@ def adapted_series(cfg_path: Path, degree: int, theta: float, max_dofs: int, n0:
         geo = refine(model.geo, np.flatnonzero(dorfler(eta2, theta, comm)))
     fine = model.geo
     for _ in range(ref_refinements):
-        fine = refine(fine, np.arange(fine.mesh.topology.index_map(2).size_local))
+        fine = refine_uniformly(fine)
     ref_cfg = load(cfg_path, [f"mesh.nx={n0}", f"mesh.ny={n0}", "time.k=1.0", "time.T=1.0", "output.xdmf=false",
                               "discretization.u_degree=2"])
     ref = build_model(ref_cfg, comm, fine)

@@ -49,12 +49,14 @@ class NewtonSolver:
         self._scale = 1.0
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
-        # the damped fallback needs an energy: contact without the implicit memory term (and the scene may turn it off)
-        self._can_fall_back = settings.newton_fallback and problem.contact is not None and problem.Fm is None
-        self._u0 = problem.u.vector.duplicate()  # the level's start, for the fallback
-        # cycles are detected where an iterate depends only on the active set (see the class docstring)
+        # contact without the implicit memory term has an energy: the damped fallback descends it (where the scene
+        # allows), and with a piecewise-linear law an iterate depends only on the active set (class docstring), so
+        # cycles are detected
         contact = problem.contact
-        self._watch_cycles = contact is not None and contact.piecewise_linear and problem.Fm is None
+        energy = contact is not None and problem.Fm is None
+        self._can_fall_back = settings.newton_fallback and energy
+        self._u0 = problem.u.vector.duplicate()  # the level's start, for the fallback
+        self._watch_cycles = energy and contact.piecewise_linear
         self._seen: list[bytes] = []  # the active sets of this level's iterates, in order
         self._watching = False  # during plain Newton only (the damped fallback may revisit an active set)
         self._cycled = False

@@ -152,7 +152,7 @@ def _rectangle(cfg, n: int) -> list[str]:
 def _uniform_meshes(path: Path, overrides: list[str], levels: int):
     """(label, overrides, geo or None) of uniform meshes: n = 4, 8, ... on a rectangle (cells about square),
     the scene's mesh refined uniformly 0, 1, ... times otherwise."""
-    from .adapt import refine
+    from .adapt import refine_uniformly
     from .config import load
     from .geometry import build
 
@@ -165,7 +165,7 @@ def _uniform_meshes(path: Path, overrides: list[str], levels: int):
     geo = build(MPI.COMM_SELF, cfg.mesh, cfg.boundaries, cfg.dim)
     for r in range(min(levels, 3)):  # a gmsh mesh is already fine: 16x its cells at r = 2
         yield f"r={r}", [], geo
-        geo = refine(geo, np.arange(geo.mesh.topology.index_map(2).size_local))
+        geo = refine_uniformly(geo)
 
 
 def uniform_sweep(ref: Reference, path: Path, overrides: list[str], tols, levels: int, steps: tuple[int, ...],
@@ -385,9 +385,9 @@ def _label(spec: dict) -> str:
 def _write(result: dict, out: Path) -> None:
     rows, unreached = [], []
     for name, sc in result["scenes"].items():
+        label, ref_tol = _label(_spec_of(sc["reference"], result)), _ref_tol(sc["reference"], result)
         if "failure" in sc["reference"]:
-            at = _label(_spec_of(sc["reference"], result))
-            unreached.append((name, None, f"no reference at {at}: " + sc["reference"]["failure"]))
+            unreached.append((name, None, f"no reference at {label}: " + sc["reference"]["failure"]))
         for r in sc["runs"]:
             if "out_of_reach" in r:
                 unreached.append((name, r["tolerance"], r["out_of_reach"]))
@@ -395,8 +395,7 @@ def _write(result: dict, out: Path) -> None:
             b = r["uniform_best"] or {}
             own = sc["reference"].get("second_vs_first")
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
-                         "ref_tol": _ref_tol(sc["reference"], result),
-                         "reference": _label(_spec_of(sc["reference"], result)),
+                         "ref_tol": ref_tol, "reference": label,
                          "ref_error_over_tol": own / r["tolerance"] if own is not None else None,
                          "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
                          "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],

@@ -170,7 +170,7 @@ def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatc
     """zeta's space estimate on the chosen mesh (three nested meshes, observed exponent) is at least the
     difference to that mesh refined uniformly twice (16 times the cells), at the same step."""
     from solver import accuracy
-    from solver.adapt import refine
+    from solver.adapt import refine_uniformly
 
     seen = []
     original = accuracy._zeta_space
@@ -178,7 +178,7 @@ def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatc
     p = _plan(MPI.COMM_WORLD, 3e-3)
     fine = p.geo
     for _ in range(2):
-        fine = refine(fine, np.arange(fine.mesh.topology.index_map(2).size_local))
+        fine = refine_uniformly(fine)
     over = [*SHORT, *p.overrides, "time.k=0.02"]
     coarse_run, fine_run = accuracy._zeta_runs(SCENE, over, MPI.COMM_WORLD, [p.geo, fine], {})
     measured = accuracy._zeta_difference(coarse_run, fine_run, MPI.COMM_WORLD)
@@ -193,7 +193,7 @@ def test_where_zetas_part_leaves_room_u_is_adapted_on_instead_of_refining_unifor
     zeta's bound on the new mesh is its bound on the coarser one plus their measured difference, and it is at least
     the difference to the new mesh refined uniformly twice (16 times the cells)."""
     from solver import accuracy
-    from solver.adapt import refine
+    from solver.adapt import refine_uniformly
 
     lines, seen, meshes = [], [], []
     original = accuracy._zeta_space
@@ -216,7 +216,7 @@ def test_where_zetas_part_leaves_room_u_is_adapted_on_instead_of_refining_unifor
     assert p.estimate["space_zeta"] == pytest.approx(seen[0][0] + step, rel=1e-12)
     fine = p.geo
     for _ in range(2):
-        fine = refine(fine, np.arange(fine.mesh.topology.index_map(2).size_local))
+        fine = refine_uniformly(fine)
     runs = accuracy._zeta_runs(SCENE, [*over, *p.overrides, *k0], MPI.COMM_WORLD, [p.geo, fine], {})
     measured = accuracy._zeta_difference(*runs, MPI.COMM_WORLD)
     assert 0.0 < measured <= p.estimate["space_zeta"], (measured, p.estimate)

@@ -6,7 +6,7 @@ import pytest
 from conftest import ROOT
 from mpi4py import MPI
 
-from solver.adapt import refine
+from solver.adapt import refine, refine_uniformly
 from solver.config import load
 from solver.estimator import dorfler, estimator_for
 from solver.geometry import build
@@ -42,6 +42,16 @@ def test_refinement_keeps_every_part(comm, scene, corner):
     geo.mesh.topology.create_connectivity(fdim, 2)
     f2c = geo.mesh.topology.connectivity(fdim, 2)
     assert all(len(f2c.links(f)) == 1 for f in geo.facet_tags.indices if f < geo.mesh.topology.index_map(fdim).size_local)
+
+
+@pytest.mark.parametrize("scene", ["example1.toml", "example2.toml"])
+def test_uniform_refinement_quadruples_the_cells_and_keeps_every_part(comm, scene):
+    cfg = load(ROOT / "configs" / scene)
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    names = [p.name for p in cfg.boundaries]
+    fine = refine_uniformly(geo)
+    assert fine.num_cells() == 4 * geo.num_cells()
+    assert _lengths(fine, names) == pytest.approx(_lengths(geo, names), rel=1e-12)
 
 
 def test_adapted_meshes_beat_uniform_ones_at_t0(comm):
