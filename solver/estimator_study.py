@@ -32,23 +32,37 @@ def _level0(cfg_path: Path, n: int, degree: int):
     return model
 
 
-def calibrate(cfg_path: Path, runs: list[tuple[int, int]], ref_n: int, log=print) -> dict:
-    """η and the error at t = 0 for every (degree, n) of ``runs`` against a P2 solve at ``ref_n``."""
+def _error_against(ref):
+    """error(model) = ||eps(u_ref - u_h)|| on the reference's space, u_h interpolated there exactly (the meshes
+    nest): the strain Gram matrix and the reference's dof points are built once."""
     import ufl
     from dolfinx import fem
     from dolfinx.fem import petsc as fpetsc
 
-    from .estimator import estimator_for
     from .reference import _petsc_to_scipy, interpolation_matrix
 
-    ref = _level0(cfg_path, ref_n, 2)
     V = ref.u.function_space
     du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    E = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))) * ufl.dx))
-    E.assemble()
-    E = _petsc_to_scipy(E)
+    gram = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))) * ufl.dx))
+    gram.assemble()
+    gram = _petsc_to_scipy(gram)
     points = V.tabulate_dof_coordinates()[:, :2]
     u_ref = ref.u.x.array.copy()
+
+    def error(model) -> float:
+        P = interpolation_matrix(model.u.function_space, points)
+        e = u_ref - (P @ model.u.x.array.reshape(-1, 2)).ravel()
+        return float(np.sqrt(max(e @ (gram @ e), 0.0)))
+
+    return error
+
+
+def calibrate(cfg_path: Path, runs: list[tuple[int, int]], ref_n: int, log=print) -> dict:
+    """η and the error at t = 0 for every (degree, n) of ``runs`` against a P2 solve at ``ref_n``."""
+    from .estimator import estimator_for
+
+    ref = _level0(cfg_path, ref_n, 2)
+    error_of = _error_against(ref)
     ref_estimate = estimator_for(ref).total()
     log(f"reference P2 n={ref_n}: eta = {ref_estimate:.4g}")
     rows = []
@@ -57,9 +71,7 @@ def calibrate(cfg_path: Path, runs: list[tuple[int, int]], ref_n: int, log=print
         est = estimator_for(model)
         eta2 = est.cells()
         eta = est.total(eta2)
-        P = interpolation_matrix(model.u.function_space, points)
-        e = u_ref - (P @ model.u.x.array.reshape(-1, 2)).ravel()
-        error = float(np.sqrt(max(e @ (E @ e), 0.0)))
+        error = error_of(model)
         mesh = model.geo.mesh
         centres = _cell_centres(mesh, len(eta2))
         shares = {name: float(eta2[np.hypot(*(centres - np.array(c)).T) < 0.1].sum() / eta2.sum())
@@ -81,15 +93,11 @@ def adapted_series(cfg_path: Path, degree: int, theta: float, max_dofs: int, n0:
     """Example 1 at t = 0 on meshes adapted by Dörfler marking (θ) from a uniform n0 mesh, until the
     displacement has more than ``max_dofs`` dofs; each error against P2 on the last mesh refined
     uniformly ``ref_refinements`` times (every mesh of the series nests in it: the transfer is exact)."""
-    import ufl
-    from dolfinx import fem
-    from dolfinx.fem import petsc as fpetsc
     from mpi4py import MPI
 
     from .adapt import refine, refine_uniformly
     from .config import load
     from .estimator import dorfler, estimator_for
-    from .reference import _petsc_to_scipy, interpolation_matrix
     from .stepper import Stepper, build_model
 
     cfg = load(cfg_path, [f"mesh.nx={n0}", f"mesh.ny={n0}", "time.k=1.0", "time.T=1.0", "output.xdmf=false",
@@ -115,17 +123,10 @@ def adapted_series(cfg_path: Path, degree: int, theta: float, max_dofs: int, n0:
     ref = build_model(ref_cfg, comm, fine)
     Stepper(ref).step(0)
     ref_eta = estimator_for(ref).total()
-    V = ref.u.function_space
-    du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    E = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.sym(ufl.grad(du)), ufl.sym(ufl.grad(w))) * ufl.dx))
-    E.assemble()
-    E = _petsc_to_scipy(E)
-    points = V.tabulate_dof_coordinates()[:, :2]
+    error_of = _error_against(ref)
     rows = []
     for model, eta in solutions:
-        P = interpolation_matrix(model.u.function_space, points)
-        e = ref.u.x.array - (P @ model.u.x.array.reshape(-1, 2)).ravel()
-        error = float(np.sqrt(max(e @ (E @ e), 0.0)))
+        error = error_of(model)
         rows.append({"cells": model.geo.num_cells(), "dofs": int(model.u.x.array.size), "eta": eta, "error": error,
                      "C": error / eta})
     log(f"P{degree} adapted reference: P2 on the last mesh refined {ref_refinements} times, {ref.u.x.array.size} dofs, "

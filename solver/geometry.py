@@ -75,19 +75,8 @@ def _rectangle(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...
         comm, [np.array([x0, y0]), np.array([x1, y1])], [cfg.nx, cfg.ny],
         cell_type=dmesh.CellType.triangle, diagonal=_DIAGONAL[cfg.diagonal],
     )
-    fdim = msh.topology.dim - 1
     tol = 1e-10 * max(x1 - x0, y1 - y0)
-    tags = {}
-    indices, values = [], []
-    for i, part in enumerate(parts, start=1):
-        facets = dmesh.locate_entities_boundary(msh, fdim, _side_marker(part.side, cfg.corners, part.interval, tol))
-        indices.append(facets)
-        values.append(np.full(len(facets), i, dtype=np.int32))
-        tags[part.name] = i
-    idx = np.concatenate(indices) if indices else np.empty(0, np.int32)
-    val = np.concatenate(values) if values else np.empty(0, np.int32)
-    order = np.argsort(idx)
-    ft = dmesh.meshtags(msh, fdim, idx[order].astype(np.int32), val[order])
+    ft, tags = _tag(msh, parts, lambda part: _side_marker(part.side, cfg.corners, part.interval, tol))
     return msh, ft, tags
 
 
