@@ -1,6 +1,6 @@
 # One install path for users, CI and the Docker image.
 #   make demo   - install if needed, run the built-in default scene (Example 1)
-#   make test   - install if needed, run the test suite (serial, then mpirun -n 2)
+#   make test   - install if needed: the layering check, the test suite (serial, then mpirun -n 2), a wheel install
 # Installing: Debian packages (dolfinx 0.5.2 stack) with apt-get, then a virtual
 # environment made from Debian's interpreter with --system-site-packages, into
 # which pip installs the project and its pip-only dependencies.
@@ -23,7 +23,7 @@ export OMPI_MCA_rmaps_base_oversubscribe := 1
 MPIRUN := mpirun -n 2
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install system-packages demo test test-serial test-mpi lint clean
+.PHONY: install system-packages demo test test-serial test-mpi lint layers clean
 
 install: .venv/.installed
 
@@ -45,12 +45,17 @@ system-packages:
 demo: install
 	$(PY) -m solver run configs/example1.toml --output results/example1 --overwrite
 
-test: install
+test: install layers
 	$(PY) -m pytest -q
 	$(MPIRUN) $(PY) -m pytest -q -m "not serial" -p no:cacheprovider
+	bash scripts/check-install.sh
+
+# the layers of solver/ point one way (contracts in pyproject.toml's [tool.importlinter])
+layers: install
+	.venv/bin/lint-imports
 
 lint: install
-	$(PY) -m ruff check solver tests
+	$(PY) -m ruff check solver studies tests scripts
 
 clean:
 	rm -rf .venv results .pytest_cache

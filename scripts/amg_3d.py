@@ -63,10 +63,11 @@ def one(variant: str, n: int, steps: int) -> dict:
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    import solver.linear
+    import solver.solvers.linear
     from solver.config import load
     from solver.errors import SolveFailure
-    from solver.stepper import Stepper, build_model
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
 
     opts, _, guess = VARIANTS[variant]
     if not guess:

@@ -29,7 +29,8 @@ def one(n: int, linear: str, steps: int) -> dict:
     from mpi4py import MPI
 
     from solver.config import load
-    from solver.stepper import build_model, run
+    from solver.io.results import run
+    from solver.run.model import build_model
 
     k = 0.02
     cfg = load(ROOT / "configs/example1_3d.toml", [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", f"time.k={k}",

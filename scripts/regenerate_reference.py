@@ -18,7 +18,8 @@ import regression  # noqa: E402
 from mpi4py import MPI  # noqa: E402
 
 from solver.config import load  # noqa: E402
-from solver.stepper import build_model, run  # noqa: E402
+from solver.io.results import run  # noqa: E402
+from solver.run.model import build_model
 
 
 def main() -> int:

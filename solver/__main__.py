@@ -1,5 +1,5 @@
 """``python -m solver``."""
 
-from .cli import main
+from solver.cli import main
 
 raise SystemExit(main())

@@ -1,4 +1,6 @@
-"""Command line: ``python -m solver {run,check,bench,study,convergence,plot,paraview} ...``; runs under mpirun.
+"""Command line: ``python -m solver {run,check,plot,paraview} ...``; runs under mpirun.
+
+The studies and benchmarks behind the published figures are ``python -m studies`` in a checkout.
 
 Bad input gives one line on stderr (rank 0 only) and exit code 2; a failed
 solve exits 1 with the step, time and reason; results are never overwritten
@@ -15,9 +17,10 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from . import __version__
-from .config import load
-from .errors import InputError, SolveFailure, UsageError
+from solver import __version__
+from solver.config import load
+from solver.errors import InputError, SolveFailure, UsageError
+from solver.run import formcache
 
 log = logging.getLogger("solver")
 
@@ -55,14 +58,6 @@ def _parser() -> argparse.ArgumentParser:
                       help="continue the run in the output directory from its last checkpoint")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     r.add_argument("--verbose", "-v", action="store_true")
-
-    sub.add_parser("bench", help="benchmark the time loop (writes benchmarks/results/bench.json, bench.md)",
-                       add_help=False)
-
-    sub.add_parser("study", help="stability map and work-precision chart (study {stability,work-precision} --help)",
-                   add_help=False)
-    sub.add_parser("convergence", help="the paper's Table 1: errors against a reference (see convergence --help)",
-                   add_help=False)
 
     sub.add_parser("plot", help="PNG pictures of a results directory (see plot --help)", add_help=False)
     sub.add_parser("paraview", help="render with ParaView's pvbatch (see paraview --help)", add_help=False)
@@ -129,8 +124,8 @@ def _progress(comm: MPI.Comm, steps: int, enabled: bool):
 def cmd_check(args, comm: MPI.Comm) -> int:
     from dolfinx import fem
 
-    from .geometry import build
-    from .operators import Dirichlet, check_rigid_motions
+    from solver.mesh.geometry import build
+    from solver.physics.operators import Dirichlet, check_rigid_motions
 
     cfg = load(args.config, args.overrides)
     # building the geometry also checks boundary names and intervals against the mesh,
@@ -160,8 +155,8 @@ def _tolerance_overrides(args) -> list[str]:
     """``--set`` overrides with ``--tolerance`` as accuracy.tolerance (checked like the scene key)."""
     if args.tolerance is None:
         return list(args.overrides)
-    from .config.accuracy import tolerance
-    from .config.fields import Ctx
+    from solver.config.accuracy import tolerance
+    from solver.config.fields import Ctx
 
     try:
         value = float(args.tolerance)
@@ -177,13 +172,14 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     cfg = load(args.config, overrides)
     outdir = Path(args.output or cfg.output.directory)
     # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
-    from .stepper import build_model, run
+    from solver.io.results import run
+    from solver.run.model import build_model
 
     plan, sensors = None, ()
     start = time.perf_counter()
     if cfg.accuracy.enabled:
-        from .accuracy import ErrorSensor, contradicting
-        from .accuracy import plan as make_plan
+        from solver.run.accuracy import ErrorSensor, contradicting
+        from solver.run.accuracy import plan as make_plan
 
         clash = contradicting(args.overrides)
         if clash:
@@ -191,6 +187,7 @@ def cmd_run(args, comm: MPI.Comm) -> int:
                              "the mesh size, the step, the degree and the order); drop one of them")
         _prepare_output(comm, outdir, args.overwrite, args.restart)
         log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
+        formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
         plan = make_plan(Path(args.config), overrides, comm, log=log.info)
         cfg = load(args.config, [*overrides, *plan.overrides])
         model = build_model(cfg, comm, plan.geo)
@@ -228,7 +225,7 @@ def _write_plan(comm: MPI.Comm, outdir: Path, plan, model) -> None:
 
     from dolfinx.io import XDMFFile
 
-    from .io import on_rank0, write_text_atomic
+    from solver.io.files import on_rank0, write_text_atomic
 
     info = plan.summary()
     info["parts"] = model.geo.tags
@@ -250,12 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     comm = MPI.COMM_WORLD
     argv = sys.argv[1:] if argv is None else argv
     _setup_logging(comm, "-v" in argv or "--verbose" in argv)
-    if argv[:1] == ["bench"]:  # its own options (python -m solver bench --help)
-        from .bench import main as bench_main
-
-        return bench_main(argv[1:])
     if argv[:1] == ["paraview"]:
-        from .paraview import main as paraview_main
+        from solver.post.paraview import main as paraview_main
 
         return paraview_main(argv[1:])
     if argv[:1] == ["plot"]:
@@ -265,17 +258,9 @@ def main(argv: list[str] | None = None) -> int:
                   "make install PLOTS=0): install the plotting extra (make install PLOTS=1), or plot with the full "
                   "image", file=sys.stderr)
             return 2
-        from .plots import main as plot_main
+        from solver.post.plots import main as plot_main
 
         return plot_main(argv[1:])
-    if argv[:1] == ["study"]:
-        from .study import main as study_main
-
-        return study_main(argv[1:])
-    if argv[:1] == ["convergence"]:
-        from .convergence import main as convergence_main
-
-        return convergence_main(argv[1:])
     args = _parser().parse_args(argv)
     try:
         if args.command == "check":

@@ -14,6 +14,10 @@ from mpi4py import MPI
 
 ROOT = Path(__file__).resolve().parents[1]
 
+from solver.run import formcache  # noqa: E402
+
+formcache.install()  # tests build many models per process: keep compiled forms in memory
+
 
 @pytest.fixture
 def comm() -> MPI.Comm:
@@ -36,10 +40,28 @@ def _collect(comm):
 
 def solve(cfg, comm, outdir=None, **kwargs):
     """Build a scene's model and run it: (model, rows)."""
-    from solver.stepper import build_model, run
+    from solver.io.results import run
+    from solver.run.model import build_model
 
     model = build_model(cfg, comm)
     return model, run(model, outdir, **kwargs)
+
+
+def point_value(f, point) -> np.ndarray:
+    """Value of a dolfinx Function at a physical point, the same on every rank."""
+    from dolfinx import geometry
+
+    mesh = f.function_space.mesh
+    comm = mesh.comm
+    p = np.zeros((1, 3))
+    p[0, : len(point)] = point
+    tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+    cells = geometry.compute_colliding_cells(mesh, geometry.compute_collisions(tree, p), p).links(0)
+    val = f.eval(p, cells[:1]) if len(cells) else None
+    found = [v for v in comm.allgather(val) if v is not None]
+    if not found:
+        raise ValueError(f"point {point} is outside the mesh")
+    return found[0]
 
 
 def eval_point(expr, mesh, point=(1 / 3, 1 / 3)) -> np.ndarray:
@@ -74,8 +96,10 @@ def mpi_env() -> dict:
 
 
 def solver_cmd(args: list[str], nproc: int = 1) -> list[str]:
-    """``python -m solver ARGS``, under ``mpirun -n NPROC --oversubscribe`` when nproc > 1."""
-    cmd = [sys.executable, "-m", "solver", *args]
+    """``python -m solver ARGS`` (``python -m studies ARGS`` for a study or benchmark), under
+    ``mpirun -n NPROC --oversubscribe`` when nproc > 1."""
+    module = "studies" if args[:1] in (["bench"], ["study"], ["convergence"]) else "solver"
+    cmd = [sys.executable, "-m", module, *args]
     return ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd] if nproc > 1 else cmd
 
 

@@ -19,7 +19,7 @@ OVERRIDES = ["mesh.nx=8", "mesh.ny=8", "time.k=0.05"]
 
 def quantities(model, rows: list[dict]) -> dict:
     """The regression quantities of a finished run (the same on every rank)."""
-    from solver.post import point_value
+    from conftest import point_value
 
     last = rows[-1]
     return {

@@ -11,9 +11,9 @@ from conftest import ROOT
 from conftest import run_cli as cli
 from mpi4py import MPI
 
-from solver.accuracy import ZETA_EXPONENT_MAX, ZETA_EXPONENT_MIN, _theta, contradicting, observed_exponent, plan
 from solver.config import load
 from solver.errors import ConfigError
+from solver.run.accuracy import ZETA_EXPONENT_MAX, ZETA_EXPONENT_MIN, _theta, contradicting, observed_exponent, plan
 
 SCENE = ROOT / "configs/example1.toml"
 SHORT = ["time.T=0.2"]  # the paper's Example 1 over 0.2 s: quick, with memory and damage
@@ -86,7 +86,7 @@ def test_parallel_plan_equals_serial(comm):
 @pytest.mark.slow
 def test_the_achieved_error_is_below_the_tolerance():
     """Example 1 over 0.2 s at TOL 3e-3, against a P2 reference planned at 3e-4 with a 4x smaller step."""
-    from solver.tolerance_study import Reference, tolerance_run
+    from studies.tolerance import Reference, tolerance_run
 
     ref = Reference.planned(SCENE, SHORT, 3e-4, 4, log=lambda *a: None)
     rec = tolerance_run(ref, SCENE, SHORT, 3e-3, log=lambda *a: None)
@@ -109,7 +109,7 @@ def test_bad_tolerance_on_the_command_line_is_one_line_exit_2(tmp_path, args, ke
 @pytest.mark.serial
 @pytest.mark.parametrize("nproc", [1, 2])
 def test_a_tolerance_run_records_what_it_chose(tmp_path, nproc):
-    from solver.post import read_csv
+    from solver.post.results import read_csv
 
     out = tmp_path / "o"
     res = cli(["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--output", str(out),
@@ -131,8 +131,8 @@ def test_a_tolerance_run_records_what_it_chose(tmp_path, nproc):
 def test_a_tolerance_run_restarts_on_the_same_mesh(tmp_path):
     """--restart plans again (the plan is deterministic), so the checkpoint fits the mesh and the last level
     is reproduced."""
-    from solver.io import TIMING_COLUMNS
-    from solver.post import read_csv
+    from solver.io.timeseries import TIMING_COLUMNS
+    from solver.post.results import read_csv
 
     out = tmp_path / "o"
     args = ["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--set",
@@ -169,8 +169,8 @@ def test_a_tolerance_out_of_reach_names_the_users_tolerance_and_the_parts_target
 def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatch):
     """zeta's space estimate on the chosen mesh (three nested meshes, observed exponent) is at least the
     difference to that mesh refined uniformly twice (16 times the cells), at the same step."""
-    from solver import accuracy
-    from solver.adapt import refine_uniformly
+    from solver.mesh.adapt import refine_uniformly
+    from solver.run import accuracy
 
     seen = []
     original = accuracy._zeta_space
@@ -192,8 +192,8 @@ def test_where_zetas_part_leaves_room_u_is_adapted_on_instead_of_refining_unifor
     share and the sum over it; a Dörfler step for u (not a uniform refinement, which gave 1,296 cells) makes room.
     zeta's bound on the new mesh is its bound on the coarser one plus their measured difference, and it is at least
     the difference to the new mesh refined uniformly twice (16 times the cells)."""
-    from solver import accuracy
-    from solver.adapt import refine_uniformly
+    from solver.mesh.adapt import refine_uniformly
+    from solver.run import accuracy
 
     lines, seen, meshes = [], [], []
     original = accuracy._zeta_space

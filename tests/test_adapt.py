@@ -6,11 +6,12 @@ import pytest
 from conftest import ROOT
 from mpi4py import MPI
 
-from solver.adapt import refine, refine_uniformly
 from solver.config import load
-from solver.estimator import dorfler, estimator_for
-from solver.geometry import build
-from solver.stepper import Stepper, build_model
+from solver.mesh.adapt import refine, refine_uniformly
+from solver.mesh.geometry import build
+from solver.physics.estimator import dorfler, estimator_for
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 
 def _lengths(geo, names):

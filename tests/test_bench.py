@@ -3,7 +3,7 @@
 import pytest
 from mpi4py import MPI
 
-from solver.bench import _median_time, _table
+from studies.bench import _median_time, _table
 
 
 def test_median_time_calls_once_to_warm_up_then_reps_times():

@@ -5,10 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from solver import checkpoint
 from solver.config import OutputConfig, from_dict
 from solver.errors import ConfigError
-from solver.stepper import Stepper, build_model
+from solver.io import checkpoint
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.3, "k": 0.1}}
 

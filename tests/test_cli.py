@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import run_cli as cli
 
-from solver.post import read_csv, read_results
+from solver.post.results import read_csv, read_results
 
 pytestmark = pytest.mark.serial  # each test starts its own processes
 

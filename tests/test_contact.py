@@ -16,9 +16,10 @@ from petsc4py import PETSc
 from scipy.optimize import brentq
 
 from solver.config import apply_overrides, from_dict
-from solver.contact import normal_compliance
-from solver.contact_points import ContactPoints
-from solver.stepper import Stepper, build_model
+from solver.physics.contact import normal_compliance
+from solver.physics.contact_points import ContactPoints
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 E, DELTA = 100.0, 1e-3
 STATIC = {"memory": {"kernel": "none"}, "damage": {"enabled": False}, "time": {"T": 1.0, "k": 1.0}}

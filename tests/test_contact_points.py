@@ -8,8 +8,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import load
-from solver.contact_points import ContactPoints
-from solver.stepper import build_model
+from solver.physics.contact_points import ContactPoints
+from solver.run.model import build_model
 
 
 @pytest.mark.parametrize("degree", [1, 2])

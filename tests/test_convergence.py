@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, point_value
 from dolfinx import fem, mesh
 from mpi4py import MPI
 
-from solver.convergence import grid_order, paper_error, prolongation, rates, study
-from solver.geometry import _DIAGONAL
-from solver.post import point_value
+from solver.mesh.geometry import _DIAGONAL
+from studies.convergence import grid_order, paper_error, prolongation, rates, study
 
 pytestmark = pytest.mark.serial  # the study runs in one process
 

@@ -8,8 +8,9 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import DamageConfig, load
-from solver.damage import Damage, eta, psi, source
 from solver.errors import DamageSolveError
+from solver.physics.damage import eta, psi, source
+from solver.solvers.damage import Damage
 
 
 def phi_hand(eps, z, c: DamageConfig) -> float:

@@ -7,7 +7,8 @@ from mpi4py import MPI
 
 from solver.config import load
 from solver.errors import DisplacementSolveError
-from solver.stepper import build_model, run
+from solver.io.results import run
+from solver.run.model import build_model
 
 # configs/hard.toml (a large swinging traction, mu = 1e-10) with P2 on its 16 x 16 mesh: at t = 0.45 plain
 # Newton cycles through three active sets until max_it
@@ -33,7 +34,7 @@ def test_plain_newton_cycles_on_the_scene(comm):
 
 def test_without_cycle_detection_the_level_runs_to_max_it(comm, monkeypatch):
     """The cycle is real: plain Newton left to run does not converge on that level."""
-    from solver import newton
+    from solver.solvers import newton
 
     original = newton.NewtonSolver.__init__
 

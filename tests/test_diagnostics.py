@@ -8,7 +8,8 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import from_dict
-from solver.stepper import Stepper, build_model
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 
 @pytest.mark.parametrize("scene", [

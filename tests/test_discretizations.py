@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from solver.discretizations import SERIES, orders_markdown, slope
+from studies.discretizations import SERIES, orders_markdown, slope
 
 
 def test_slope_of_a_power_law_and_of_too_few_points():

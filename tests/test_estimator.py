@@ -8,9 +8,10 @@ from conftest import ROOT
 from mpi4py import MPI
 
 from solver.config import from_dict
-from solver.estimator import dorfler, estimator_for
-from solver.estimator_study import calibrate
-from solver.stepper import Stepper, build_model
+from solver.physics.estimator import dorfler, estimator_for
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
+from studies.estimator import calibrate
 
 
 def _level0(comm, scene: dict):

@@ -8,8 +8,8 @@ from conftest import ROOT, by_cell, by_node, run_cli, solve
 from mpi4py import MPI
 
 from solver.config import load
-from solver.io import TIMING_COLUMNS
-from solver.post import read_csv, read_results
+from solver.io.timeseries import TIMING_COLUMNS
+from solver.post.results import read_csv, read_results
 
 
 def test_example1_regression(comm):
@@ -121,7 +121,7 @@ def test_foundation_scene_balances_and_spreads(comm):
     """configs/foundation.toml (coarser): the plate, the foundation and gravity are in equilibrium at every
     level (reaction_top_y + contact force + f_y |Omega| = 0; no net horizontal force on the symmetry plane),
     the contact zone spreads as the plate goes down, and sigma_33 is part of the plane-strain output."""
-    from solver.outputs import CellStresses
+    from solver.io.fields import CellStresses
 
     cfg = load(ROOT / "configs/foundation.toml", ["mesh.nx=20", "mesh.ny=10", "time.k=0.1"])
     model, rows = solve(cfg, comm)

@@ -2,9 +2,10 @@
 
 import numpy as np
 
-from solver import formcache
 from solver.config import from_dict
-from solver.stepper import Stepper, build_model
+from solver.run import formcache
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 
 def test_a_second_build_reads_no_disk_cache_and_gives_the_same_level(comm, monkeypatch):

@@ -5,7 +5,7 @@ from conftest import ROOT
 
 from solver.config import load
 from solver.errors import ConfigError
-from solver.geometry import build
+from solver.mesh.geometry import build
 
 
 def test_rectangle_parts_have_their_lengths(comm):

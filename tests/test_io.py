@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from solver.io import CSV_COLUMNS, CSVWriter, von_mises_array, write_text_atomic
+from solver.io.files import write_text_atomic
+from solver.io.timeseries import CSV_COLUMNS, CSVWriter
+from solver.physics.material import von_mises_array
 
 
 def test_von_mises_array_plane_and_3d():

@@ -5,7 +5,7 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from solver.linear import REASONS_KSP, clear_options, direct_options, make_ksp, set_options
+from solver.solvers.linear import REASONS_KSP, clear_options, direct_options, make_ksp, set_options
 
 
 def test_direct_options_by_process_count():
@@ -45,7 +45,7 @@ def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
     from dolfinx import fem, mesh
     from dolfinx.fem import petsc as fpetsc
 
-    from solver.linear import rigid_body_modes
+    from solver.solvers.linear import rigid_body_modes
 
     msh = mesh.create_unit_square(comm, 3, 4) if dim == 2 else mesh.create_unit_cube(comm, 2, 3, 2)
     V = fem.VectorFunctionSpace(msh, ("CG", 2))
@@ -66,7 +66,7 @@ def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
 
 
 def test_iterative_options_tie_the_krylov_tolerance_to_newton():
-    from solver.linear import default_amg, iterative_options, linear_options
+    from solver.solvers.linear import default_amg, iterative_options, linear_options
 
     opts = iterative_options(1e-10, elasticity=True)
     assert opts["ksp_type"] == "cg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
@@ -95,7 +95,7 @@ def _assert_same_run(a_dir, b_dir, tol: float = 1e-7) -> None:
     """Displacement and damage at every node and written time, and every CSV column, agree to ``tol``."""
     from conftest import by_node
 
-    from solver.post import read_csv, read_results
+    from solver.post.results import read_csv, read_results
 
     a, b = read_results(a_dir), read_results(b_dir)
     assert a["times"] == b["times"] and len(a["times"]) == 11
@@ -159,7 +159,7 @@ class _Size:
 
 
 def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_in_3d():
-    from solver.linear import AUTO_ITERATIVE_DOFS_3D, choose_linear
+    from solver.solvers.linear import AUTO_ITERATIVE_DOFS_3D, choose_linear
 
     big = 10 * AUTO_ITERATIVE_DOFS_3D
     for size, expected in ((1, "petsc"), (2, "redundant"), (4, "redundant"), (5, "mumps")):
@@ -183,8 +183,8 @@ def _small_3d(linear: str, extra: tuple[str, ...] = ()):
 
 
 def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypatch):
-    import solver.linear
-    from solver.stepper import build_model
+    import solver.solvers.linear
+    from solver.run.model import build_model
 
     assert build_model(_small_3d("auto"), comm).linear == "mumps"  # 192 dofs
     monkeypatch.setattr(solver.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
@@ -196,9 +196,10 @@ def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypat
 
 @pytest.mark.parametrize("linear", ["iterative", "mumps"])
 def test_krylov_columns_only_with_the_iterative_solver(comm, shared_tmp, linear):
-    from solver.io import CSV_COLUMNS, KRYLOV_COLUMNS
-    from solver.post import read_csv
-    from solver.stepper import build_model, run
+    from solver.io.results import run
+    from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS
+    from solver.post.results import read_csv
+    from solver.run.model import build_model
 
     out = shared_tmp / linear
     if comm.rank == 0:
@@ -220,7 +221,8 @@ def test_krylov_columns_only_with_the_iterative_solver(comm, shared_tmp, linear)
 def test_multigrid_level_options_reach_the_preconditioner(comm):
     """Options of the multigrid levels are read when the preconditioner is set up (at the first solve): the
     defaults and the scene's own must still be there then."""
-    from solver.stepper import Stepper, build_model
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
 
     model = build_model(_small_3d("iterative", ("solver.petsc_options.mech_pc_type='gamg'",
                                                 "solver.petsc_options.mech_mg_levels_ksp_max_it=3")), comm)
@@ -235,7 +237,8 @@ def test_multigrid_level_options_reach_the_preconditioner(comm):
 def test_mumps_reads_its_workspace_option_in_both_solvers(comm):
     """MUMPS reads mat_mumps_* when it factors (after the options were written and cleared): the damage KSP
     is factored while they are set, the displacement SNES's around each solve."""
-    from solver.stepper import Stepper, build_model
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
 
     model = build_model(_small_3d("mumps"), comm)
     Stepper(model).step(0)

@@ -6,8 +6,7 @@ import ufl
 from conftest import eval_point, unit_mesh
 from dolfinx import fem
 
-from solver.io import von_mises_array
-from solver.material import elasticity, lame, out_of_plane_stress, truncate, von_mises
+from solver.physics.material import elasticity, lame, out_of_plane_stress, truncate, von_mises, von_mises_array
 
 
 def test_plane_stress_matches_paper_formula(comm):

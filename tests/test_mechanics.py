@@ -9,7 +9,7 @@ from conftest import ROOT, solve
 from mpi4py import MPI
 
 from solver.config import from_dict
-from solver.stepper import build_model
+from solver.run.model import build_model
 
 
 def _x_stretch_scene(memory: dict, T=0.5, k=0.1, t=10.0, L=1000.0):
@@ -136,12 +136,12 @@ def test_p2_elastic_contact_matches_an_independent_p2_solve(comm):
     (P2, plane stress, clamped left, load (-10, -10) on the right, p(r) = r+/1e-10 on the bottom with a degree-4
     facet rule) and solved by dolfinx's own Newton solver: u(1, 1) to 1e-8."""
     import ufl
+    from conftest import point_value
     from dolfinx import fem, mesh, nls
     from dolfinx.fem import petsc as fpetsc
 
     from solver.config import load
-    from solver.post import point_value
-    from solver.stepper import Stepper
+    from solver.run.stepper import Stepper
 
     msh = mesh.create_unit_square(comm, 16, 16)
     V = fem.VectorFunctionSpace(msh, ("CG", 2))

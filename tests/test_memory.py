@@ -11,8 +11,15 @@ from mpi4py import MPI
 
 from solver.config import MemoryConfig, from_dict
 from solver.errors import ConfigError
-from solver.material import elasticity, lame, strain
-from solver.memory import MemorySource, PronyHistory, QuadratureRule, TabulatedHistory, make_history, memory_source
+from solver.physics.material import elasticity, lame, strain
+from solver.physics.memory import (
+    MemorySource,
+    PronyHistory,
+    QuadratureRule,
+    TabulatedHistory,
+    make_history,
+    memory_source,
+)
 
 
 def A(eps):
@@ -131,9 +138,9 @@ def test_plane_strain_sigma_33_has_its_memory_part(comm, kernel):
     sigma_33 = lambda tr eps(u_n) + M_33,n with M_33 the kernel's sum of zeta0 Phi_L(lambda tr eps(u_m)),
     truncated (L = 3 < lambda tr eps); the von Mises value includes it."""
     from solver.config import from_dict
-    from solver.io import von_mises_array
-    from solver.outputs import CellStresses
-    from solver.stepper import build_model
+    from solver.io.fields import CellStresses
+    from solver.physics.material import von_mises_array
+    from solver.run.model import build_model
 
     E, nu, t, k, L, zeta0 = 100.0, 0.3, 10.0, 0.1, 3.0, 0.8
     cfg = from_dict({
@@ -221,7 +228,8 @@ def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
     from conftest import ROOT
 
     from solver.config import load
-    from solver.stepper import Stepper, build_model
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
 
     def level0(r, k):
         model = build_model(load(ROOT / "configs/example1.toml", ["mesh.nx=4", "mesh.ny=4", f"time.k={k}",
@@ -240,7 +248,8 @@ def test_extrapolated_current_term_is_its_definition(comm, model_name):
     from conftest import ROOT
 
     from solver.config import load
-    from solver.stepper import Stepper, build_model
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
 
     L, k = 5.0, 0.1
     cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=3", "mesh.ny=3", "discretization.u_degree=2", "time.order=2",
@@ -304,7 +313,7 @@ def test_extrapolated_source_from_kept_strains(comm, keep):
 
 def test_equal_is_exact():
     """The kept-strain lookup's comparison: a sample first, then every entry."""
-    from solver.memory import _equal
+    from solver.physics.memory import _equal
 
     a = np.arange(1000.0)
     b = a.copy()
@@ -319,7 +328,7 @@ def test_equal_is_exact():
                                            ([1e308, 1e308, np.nan], False)])
 def test_all_finite_decides_like_isfinite(values, finite):
     """The one-sum NaN/inf test: an overflow of finite entries is not mistaken for an infinite one."""
-    from solver.memory import all_finite
+    from solver.physics.memory import all_finite
 
     a = np.array(values, dtype=float)
     assert all_finite(a) is finite

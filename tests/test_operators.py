@@ -9,7 +9,7 @@ from mpi4py import MPI
 
 from solver.config import from_dict
 from solver.errors import RigidMotionError
-from solver.stepper import build_model
+from solver.run.model import build_model
 
 E, NU = 100.0, 0.3
 ROLLER_X = {"role": "displacement", "displacement": [0.0, "free"]}  # a symmetry plane x = const
@@ -129,7 +129,7 @@ def test_block_squeezed_between_rollers(comm, method, contact):
     (contact inactive) solve exactly; penalty-duality iterates, here to rtol = 1e-13."""
     model = build_model(from_dict(_squeezed(method, contact)), comm)
     tol = 1e-12
-    from solver.stepper import Stepper
+    from solver.run.stepper import Stepper
 
     stepper = Stepper(model)
     x = model.u.function_space.tabulate_dof_coordinates()

@@ -9,10 +9,10 @@ from dolfinx.fem import petsc as fpetsc
 from petsc4py import PETSc
 
 from solver.config import load
-from solver.io import von_mises_array
-from solver.material import elasticity, strain
-from solver.outputs import CellStresses, Outputs
-from solver.stepper import Stepper, build_model
+from solver.io.fields import CellStresses, Outputs
+from solver.physics.material import elasticity, strain, von_mises_array
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
 
 
 def projection(expr, mesh, dx) -> np.ndarray:
@@ -59,7 +59,7 @@ def test_cell_stresses_equal_the_assembled_projection(comm, degree, model):
 @pytest.mark.parametrize("u_degree", [1, 2])
 def test_implicit_trapezoid_stress_includes_the_current_level(comm, u_degree):
     """With memory.rule = "trapezoid" the history keeps the past only; sigma_n = A eps(u_n) + M_n + (k/2) g(0) H_n."""
-    from solver.memory import memory_source
+    from solver.physics.memory import memory_source
 
     cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05", "memory.rule='trapezoid'",
                                                 f"discretization.u_degree={u_degree}"])

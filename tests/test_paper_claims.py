@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT, solve
 
 from solver.config import load
-from solver.post import read_results
+from solver.post.results import read_results
 
 
 def _run(comm, tmp, name, k):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-import solver.paraview as spv
+import solver.post.paraview as spv
 
 pytestmark = pytest.mark.serial  # starts its own processes (pvbatch has its own MPI)
 
@@ -149,7 +149,7 @@ def test_paraview_readers_read_the_series(tmp_path, paraview, closed):
                          env=spv.environment(), capture_output=True, text=True, timeout=300)
     assert got.returncode == 0, got.stderr[-3000:]
     seen = json.loads((tmp_path / "o.json").read_text())
-    from solver.xdmf import read_series
+    from solver.io.xdmf import read_series
 
     ref = read_series(tmp_path / "r" / "solution.xdmf")  # file order; ParaView keeps it
     for reader, r in seen.items():

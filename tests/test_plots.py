@@ -23,7 +23,7 @@ def test_plot_without_the_plotting_extra_is_one_line(module, tmp_path):
 
 
 def test_charts_are_skipped_without_matplotlib(capsys, monkeypatch):
-    from solver.charts import pyplot
+    from solver.post.charts import pyplot
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     assert pyplot("the chart") is None

@@ -1,10 +1,10 @@
 """Post-processing helpers: point values on any rank, reading the CSV back (the series: test_xdmf)."""
 
 import pytest
-from conftest import unit_mesh
+from conftest import point_value, unit_mesh
 from dolfinx import fem
 
-from solver.post import point_value, read_csv
+from solver.post.results import read_csv
 
 
 def test_point_value_is_the_same_on_every_rank_and_refuses_outside(comm):

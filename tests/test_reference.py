@@ -6,7 +6,8 @@ from conftest import ROOT
 from dolfinx import fem, mesh
 from mpi4py import MPI
 
-from solver.reference import FineReference, interpolation_matrix
+from solver.mesh.transfer import interpolation_matrix
+from studies.reference import FineReference
 
 pytestmark = pytest.mark.serial  # the reference is one process
 
@@ -49,8 +50,10 @@ def test_pointwise_error_against_the_exact_one(ref_n):
     from dolfinx.fem import petsc as fpetsc
 
     from solver.config import load
-    from solver.reference import PointwiseError, _petsc_to_scipy
-    from solver.stepper import Stepper, build_model
+    from solver.mesh.transfer import petsc_to_scipy
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
+    from studies.reference import PointwiseError
 
     def level0(n, degree):
         cfg = load(ROOT / "configs/example1.toml", [f"mesh.nx={n}", f"mesh.ny={n}", "time.k=1.0", "output.xdmf=false",
@@ -73,8 +76,8 @@ def test_pointwise_error_against_the_exact_one(ref_n):
     z, xi = ufl.TrialFunction(Z), ufl.TestFunction(Z)
     M = fpetsc.assemble_matrix(fem.form(z * xi * ufl.dx))
     M.assemble()
-    exact_u = np.sqrt(du @ (_petsc_to_scipy(E) @ du))
-    exact_z = np.sqrt(dz @ (_petsc_to_scipy(M) @ dz))
+    exact_u = np.sqrt(du @ (petsc_to_scipy(E) @ du))
+    exact_z = np.sqrt(dz @ (petsc_to_scipy(M) @ dz))
     assert exact_u > 1e-3 and exact_z > 1e-3
     eu, ez = PointwiseError(V, Z, run)(ref.u.x.array, ref.damage.zeta.x.array)
     if ref_n == 4:

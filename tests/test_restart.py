@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, by_cell, by_node, mpi_env, solver_cmd
 
-from solver.io import TIMING_COLUMNS
-from solver.post import read_csv, read_results
-from solver.xdmf import QUEUE_LEVELS
+from solver.io.timeseries import TIMING_COLUMNS
+from solver.io.xdmf import QUEUE_LEVELS
+from solver.post.results import read_csv, read_results
 
 pytestmark = pytest.mark.serial  # starts (and kills) its own processes
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from solver import scaling
+from studies import scaling
 
 
 def test_a_case_reports_its_figures_on_every_rank(comm):

@@ -6,7 +6,9 @@ from conftest import ROOT, solve
 
 from solver.config import from_dict
 from solver.errors import DisplacementSolveError
-from solver.stepper import Stepper, _csv_lines_until, build_model, run, writes_level
+from solver.io.results import _csv_lines_until, run
+from solver.run.model import build_model
+from solver.run.stepper import Stepper, writes_level
 
 SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.3, "k": 0.1}}
 

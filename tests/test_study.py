@@ -3,7 +3,7 @@
 import math
 
 from solver.errors import DamageSolveError, DisplacementSolveError
-from solver.study import _status, pareto
+from studies.study import _status, pareto
 
 
 def test_pareto_keeps_the_points_no_other_beats_in_both():

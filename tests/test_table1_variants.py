@@ -7,9 +7,9 @@ import pytest
 from conftest import ROOT
 from mpi4py import MPI
 
-from solver.convergence import Fields, Reference
 from solver.errors import UsageError
-from solver.table1_variants import (
+from studies.convergence import Fields, Reference
+from studies.table1_variants import (
     FORMS,
     U_FORMS,
     VARIANTS,
@@ -89,7 +89,8 @@ def test_norms_are_ordered(runs):
 def test_samples_between_levels_equal_a_direct_computation(measurer):
     """The held and interpolated samples (expanded quadratic forms) against differences formed directly."""
     from solver.config import load
-    from solver.stepper import build_model, run
+    from solver.io.results import run
+    from solver.run.model import build_model
 
     n, k = 4, 0.2
     ref = measurer.ref
@@ -154,7 +155,7 @@ def test_study_writes_every_variant(tmp_path):
 
 @pytest.mark.parametrize("argv", [["--ns", "3", "--ref-n", "8"], ["--ks", "0.0007"]])
 def test_cli_refuses_non_nested_grids(argv, capsys, tmp_path):
-    from solver.study import main
+    from studies.study import main
 
     assert main(["table1-variants", *argv, "--output", str(tmp_path), "--cache", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()

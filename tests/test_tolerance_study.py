@@ -10,7 +10,7 @@ import subprocess
 import pytest
 from conftest import ROOT, solver_cmd
 
-from solver.tolerance_study import _kept, _write, scene_ref_tol, scene_ref_uniform
+from studies.tolerance import _kept, _write, scene_ref_tol, scene_ref_uniform
 
 
 def test_scene_ref_tol_parses_name_and_tolerance():

@@ -15,8 +15,8 @@ import pytest
 from conftest import ROOT, mpi_env
 from mpi4py import MPI
 
-import solver.xdmf as sx
-from solver.xdmf import FieldSpec, SeriesError, XDMFSeries, read_series
+import solver.io.xdmf as sx
+from solver.io.xdmf import FieldSpec, SeriesError, XDMFSeries, read_series
 
 FIELDS = [FieldSpec("displacement", "Node", "Vector"), FieldSpec("damage", "Node", "Scalar"),
           FieldSpec("stress", "Cell", "Tensor6"), FieldSpec("von_mises", "Cell", "Scalar")]
@@ -310,7 +310,7 @@ import sys
 import numpy as np
 from mpi4py import MPI
 sys.path.insert(0, {tests!r})
-import solver.xdmf as sx
+import solver.io.xdmf as sx
 from test_xdmf import Scene
 sx.MAX_LEVELS_PER_CHUNK = 4
 sx.BACKGROUND_BYTES = {background}

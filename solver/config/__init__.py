@@ -7,7 +7,8 @@ is allowed. Nothing here touches dolfinx, so a scene can be checked before any
 computation starts. See :mod:`solver.config.scene` for how sections are registered.
 """
 
-from ..errors import ConfigError
+from solver.errors import ConfigError
+
 from .accuracy import AccuracyConfig
 from .body_force import BodyForceConfig
 from .boundary import LAWS, PAPER_BOUNDARIES, ROLES, SIDES, BoundaryConfig, table_at

@@ -6,7 +6,7 @@ import dataclasses
 import math
 from typing import Any
 
-from ..errors import ConfigError
+from solver.errors import ConfigError
 
 
 class Ctx:

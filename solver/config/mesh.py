@@ -7,7 +7,8 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import ConfigError
+from solver.errors import ConfigError
+
 from .fields import Ctx, check_keys, integer, names, need, string, vector
 
 DIAGONALS = ("right", "left", "right/left", "left/right", "crossed")

@@ -16,7 +16,8 @@ from typing import Any, NamedTuple
 
 import tomlkit
 
-from ..errors import ConfigError
+from solver.errors import ConfigError
+
 from . import accuracy, body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
 from .accuracy import AccuracyConfig
 from .body_force import BodyForceConfig

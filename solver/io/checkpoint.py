@@ -1,0 +1,171 @@
+"""Checkpoints: the whole state of a run at a time level, for ``run --restart``.
+
+Every value is stored against the physical coordinates of its dof (mesh nodes for the
+P1 fields, quadrature points for the history), gathered from the owned dofs of all
+ranks and sorted. A restart looks its own dofs up by coordinates, so it does not depend
+on the partition (which is not reproducible from one parallel launch to the next) nor on
+the number of ranks. Stored: u, zeta, every history array (M_n of the level: the next
+step commits M_{n+1} first), the displacement solver's carried vectors (so the first step
+after a restart does the same arithmetic), the step, and a hash of the scene (output
+settings excluded) so that a restart cannot silently continue another problem. Rank 0
+writes with h5py to a temporary name and renames.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+
+from solver.config import Config, OutputConfig, dumps
+from solver.errors import ConfigError
+from solver.io.files import on_rank0
+
+NAME = "checkpoint.h5"
+
+
+def scene_hash(cfg: Config) -> str:
+    """Hash of everything that defines the solution (not where or how often it is written)."""
+    text = dumps(replace(cfg, output=OutputConfig(), source=""))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _keys(coords: np.ndarray) -> np.ndarray:
+    """Sortable keys of points (rounded to 1e-10)."""
+    c = np.ascontiguousarray(np.round(coords, 10))
+    return c.view([(f"x{i}", c.dtype) for i in range(c.shape[1])]).ravel()
+
+
+@dataclass
+class _Field:
+    coords: np.ndarray  # dof coordinates (owned first)
+    rows: np.ndarray  # values, one row per dof
+    owned: int
+    assign: object  # callable(rows) writing loaded values back
+
+
+def _fields(model) -> dict[str, _Field]:
+    """Everything a checkpoint holds, each with its dof coordinates and how to write it back."""
+    V = model.u.function_space
+    nv = V.dofmap.index_map.size_local
+    cv = V.tabulate_dof_coordinates()
+
+    def setter(target: np.ndarray):
+        def assign(rows: np.ndarray) -> None:
+            target[...] = rows.reshape(target.shape)
+        return assign
+
+    out = {"u": _Field(cv, model.u.x.array.reshape(len(cv), -1), nv, setter(model.u.x.array))}
+    if model.u_prev is not None:  # time.order = 2: u_{n-1} for the extrapolation
+        up = model.u_prev.x.array
+        out["u_prev"] = _Field(cv, up.reshape(len(cv), -1), nv, setter(up))
+    mech = model.mech.state()  # owned parts of PETSc vectors
+    for k, v in mech.items():
+        out[f"mech/{k}"] = _Field(cv[:nv], v.reshape(nv, -1), nv, lambda rows, k=k: model.mech.restore_vector(k, rows))
+    if model.damage is not None:
+        Z = model.damage.V
+        cz = Z.tabulate_dof_coordinates()
+        z = model.damage.zeta.x.array
+        nz = Z.dofmap.index_map.size_local
+        out["zeta"] = _Field(cz, z.reshape(len(cz), 1), nz, setter(z))
+        for k, v in model.damage.state().items():  # owned parts of PETSc vectors
+            out[f"damage/{k}"] = _Field(cz[:nz], v.reshape(nz, 1), nz,
+                                        lambda rows, k=k: model.damage.restore(k, rows))
+    if model.history is not None:
+        Q = model.history.M.function_space
+        rule = model.history.rule
+        gdim = model.geo.mesh.geometry.dim
+        cq = rule.evaluator(ufl.SpatialCoordinate(model.geo.mesh), rule.space((gdim,)))().reshape(-1, gdim)
+        nq = Q.dofmap.index_map.size_local
+        for k, v in model.history.state().items():
+            if v.ndim == 1:
+                out[f"history/{k}"] = _Field(cq, v.reshape(len(cq), -1), nq, setter(v))
+            else:  # the tabulated past (steps + 1, points * d * d): stored per point
+                def assign_past(rows: np.ndarray, v=v) -> None:
+                    v[...] = rows.reshape(len(cq), v.shape[0], -1).transpose(1, 0, 2).reshape(v.shape)
+                rows = v.reshape(v.shape[0], len(cq), -1).transpose(1, 0, 2).reshape(len(cq), -1)
+                out[f"history/{k}"] = _Field(cq, rows, nq, assign_past)
+    return out
+
+
+def write(directory: Path, model, step: int, t: float, part: int) -> None:
+    """Write the checkpoint of level ``step`` (collective; rank 0 writes)."""
+    comm = model.comm
+    fields = _fields(model)
+    gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
+
+    def save() -> None:
+        import h5py
+
+        path = Path(directory) / NAME
+        tmp = path.with_name(NAME + ".tmp")
+        try:
+            with h5py.File(tmp, "w") as h5:
+                h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
+                                 **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
+                                 **({f"damage_{k}": v for k, v in model.damage.scalars().items()}
+                                    if model.damage else {})})
+                for name, parts in gathered.items():
+                    coords = np.concatenate([p[0] for p in parts])
+                    values = np.concatenate([p[1] for p in parts])
+                    order = np.argsort(_keys(coords))
+                    h5.create_dataset(f"{name}/coords", data=coords[order])
+                    h5.create_dataset(f"{name}/values", data=values[order])
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+        except Exception as exc:  # a full disk: the previous checkpoint stays as it was
+            tmp.unlink(missing_ok=True)
+            if isinstance(exc, OSError):
+                raise
+            raise OSError(f"{NAME}: {exc}") from exc
+        os.replace(tmp, path)
+
+    on_rank0(comm, save)
+
+
+@dataclass
+class Checkpoint:
+    """What a restart needs: the level, its time, and which data part comes next."""
+
+    step: int
+    t: float
+    part: int
+
+
+def read(directory: Path, model) -> Checkpoint:
+    """Load the checkpoint into the model (u, zeta, history, solver state); refuse a mismatch clearly."""
+    import h5py
+
+    comm = model.comm
+    path = Path(directory) / NAME
+    if not path.exists():
+        raise ConfigError(f"--restart: {path} does not exist (was the run started with output.checkpoint_every > 0?)")
+    with h5py.File(path, "r") as h5:
+        a = dict(h5.attrs)
+        if a["scene"] != scene_hash(model.cfg):
+            raise ConfigError(f"--restart: the scene differs from the one that wrote {path} (only [output] may change)")
+        fields, loaded, ok = _fields(model), {}, True
+        for name, f in fields.items():
+            ref = _keys(h5[f"{name}/coords"][...])
+            mine = _keys(f.coords)
+            idx = np.clip(np.searchsorted(ref, mine), 0, max(len(ref) - 1, 0))
+            ok &= bool(len(ref)) and bool(np.all(ref[idx] == mine))
+            loaded[name] = idx
+        if not comm.allreduce(ok, op=MPI.LAND):
+            raise ConfigError(f"--restart: the mesh differs from the one in {path}")
+        for name, f in fields.items():
+            f.assign(h5[f"{name}/values"][...][loaded[name]])
+    model.mech.restore_scalars({k.removeprefix("mech_"): v for k, v in a.items() if k.startswith("mech_")})
+    if model.damage is not None:
+        model.damage.restore_scalars({k.removeprefix("damage_"): v for k, v in a.items() if k.startswith("damage_")})
+    if model.u_prev is not None:
+        model.u_prev.x.scatter_forward()
+    model.u.x.scatter_forward()
+    if model.damage is not None:
+        model.damage.zeta.x.scatter_forward()
+    return Checkpoint(int(a["step"]), float(a["t"]), int(a["part"]) + 1)

@@ -1,0 +1,221 @@
+"""The fields a run writes for ParaView: u, zeta and cell-wise stresses (docs/model.md §5 for what the paper shows).
+
+XDMF cannot hold quadrature functions, so the stresses sigma = A eps(u) + M and A eps(u)
+are written as cell averages (the L2 projection onto piecewise constants), with their von
+Mises values. ``output.fields`` chooses which are written; only what those need is
+computed. The series itself is :class:`solver.xdmf.XDMFSeries`. P2 fields
+(``discretization.u_degree`` or ``zeta_degree`` = 2) are written as their P1 interpolants on
+the mesh, their exact values at the vertices: ParaView shows the vertex values the solver
+computed and interpolates linearly in between.
+
+In plane strain the out-of-plane stress sigma_33 = lambda tr eps(u) + M_33 (docs/model.md
+§2) is part of the stress: the von Mises values include it, and ``stress_zz`` /
+``elastic_stress_zz`` write it (requested in ``output.fields``; plane strain only).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+
+from solver.config import MaterialConfig, OutputConfig
+from solver.errors import OutputError, UsageError
+from solver.io.xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
+from solver.physics.material import lame, strain, von_mises_array
+
+KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
+         "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
+         "stress_zz": ("Cell", "Scalar"), "elastic_stress_zz": ("Cell", "Scalar")}
+PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
+
+
+class CellStresses:
+    """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
+
+    For P1 displacements eps(u) is constant on each cell: its independent components are one
+    sparse product B u with B assembled once (rows scaled by 1/|K|; 12 entries per triangle),
+    and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
+    of the quadrature rule that integrates it everywhere else; on affine cells its L2
+    projection onto constants with that rule is the weighted mean of its point values. Rows
+    are in the local order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
+    In plane strain, sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
+    """
+
+    def __init__(self, model, material: MaterialConfig) -> None:
+        mesh = model.geo.mesh
+        self.d = d = mesh.geometry.dim
+        self.u, self.history = model.u, model.history
+        self.lam, self.mu = lame(material.E, material.nu, material.model)
+        self.plane_strain = material.model == "plane_strain" and d == 2
+        self._trace: np.ndarray | None = None
+        self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
+        E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
+        eps = strain(ufl.TrialFunction(model.u.function_space))
+        components = ufl.as_vector([eps[i, j] for i, j in self.pairs])
+        self.B = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
+        self.B.assemble()
+        S0 = fem.FunctionSpace(mesh, ("DG", 0))
+        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
+        scale = self.B.createVecLeft()
+        n_dofs = E0.dofmap.index_map.size_local
+        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], len(self.pairs))
+        self.B.diagonalScale(L=scale)
+        self.out = self.B.createVecLeft()
+        imap = mesh.topology.index_map(mesh.topology.dim)
+        n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
+        self.cells = RowMap(E0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], len(self.pairs))  # one dof per cell
+        if self.history is not None:
+            rule = model.rule
+            npts = len(rule.weights)
+            self.npts = npts
+            self.points = RowMap(self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], d * d)
+            self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
+            if self.plane_strain:  # M_33 is a scalar at the same points
+                self.points_zz = RowMap(self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], 1)
+
+    def elastic(self) -> np.ndarray:
+        """A eps(u) per owned cell, rows of d*d (row-major)."""
+        self.B.mult(self.u.vector, self.out)
+        e = self.cells.take(self.out.array_r)
+        d = self.d
+        s = np.empty((len(e), d, d))
+        trace = e[:, :d].sum(axis=1)
+        self._trace = trace
+        for k, (i, j) in enumerate(self.pairs):
+            if i == j:
+                s[:, i, i] = 2.0 * self.mu * e[:, k] + self.lam * trace
+            else:
+                s[:, i, j] = s[:, j, i] = 2.0 * self.mu * e[:, k]
+        return s.reshape(len(e), d * d)
+
+    def total(self, elastic: np.ndarray) -> np.ndarray:
+        """sigma = A eps(u) + (cell average of M), given A eps(u)."""
+        if self.history is None:
+            return elastic
+        return elastic + self._cell_average(self.history.M.x.array, self.history.H, self.points, self.d * self.d)
+
+    def out_of_plane(self) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_33, (A eps)_33) per owned cell in plane strain, after :meth:`elastic`: eps_33 = 0, so
+        (A eps)_33 = lambda tr eps(u), and sigma_33 adds the cell average of the memory's M_33."""
+        elastic = self.lam * self._trace
+        if self.history is None:
+            return elastic, elastic
+        zz = self.history.out_of_plane
+        return elastic + self._cell_average(zz.M.x.array, zz.H, self.points_zz, 1)[:, 0], elastic
+
+    def _cell_average(self, memory: np.ndarray, source, points: RowMap, width: int) -> np.ndarray:
+        """Cell averages of a memory tensor at the rule's points (rows of ``width``)."""
+        weight = getattr(self.history, "current_weight", None)
+        if weight is not None and float(weight.value) != 0.0:
+            # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
+            memory = memory + float(weight.value) * source()
+        M = points.take(memory)
+        if self.npts == 1:  # one point per cell: the average is the value
+            return M
+        return (M.reshape(-1, self.npts, width) * self.q_weights).sum(axis=1)
+
+
+class Outputs:
+    """Owns the written fields and the XDMF series of a run (``outdir`` None: nothing is written).
+
+    ``expected_levels`` sizes the series' files; ``keep_until`` (a restart) keeps the levels
+    already written up to that time and appends after them.
+    """
+
+    def __init__(self, model, material: MaterialConfig, output: OutputConfig, outdir: Path | None,
+                 expected_levels: int | None = None, keep_until: float | None = None) -> None:
+        mesh = model.geo.mesh
+        self.d = mesh.geometry.dim
+        self.series = None
+        plane_strain = material.model == "plane_strain" and self.d == 2
+        self.names = [f for f in output.fields if (f != "damage" or model.damage is not None)
+                      and (f not in PLANE_STRAIN_ONLY or plane_strain)]
+        if outdir is None or not self.names:
+            return
+        self.model = model
+        self.rows = DolfinxRows(mesh)
+        self._node_fields = {"displacement": _vertex_values(model.u)}
+        if model.damage is not None:
+            self._node_fields["damage"] = _vertex_values(model.damage.zeta)
+        self.stresses = CellStresses(model, material) if set(self.names) - {"displacement", "damage"} else None
+        specs = [FieldSpec(name, *KINDS[name]) for name in self.names]
+        try:
+            self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, expected_levels, keep_until)
+        except SeriesError as exc:
+            raise (UsageError(f"--restart: {exc}") if keep_until is not None else OutputError(str(exc))) from None
+
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        """The chosen cell fields on the owned cells: stresses as d*d rows, von Mises values."""
+        want, out = set(self.names), {}
+        if self.stresses is None:
+            return out
+        elastic = self.stresses.elastic()
+        if want & {"stress", "von_mises"}:
+            out["stress"] = self.stresses.total(elastic)
+        out["elastic_stress"] = elastic
+        zz = {"stress": None, "elastic_stress": None}
+        if self.stresses.plane_strain:
+            zz["stress"], zz["elastic_stress"] = self.stresses.out_of_plane()
+            out["stress_zz"], out["elastic_stress_zz"] = zz["stress"], zz["elastic_stress"]
+        for tensor, scalar in (("stress", "von_mises"), ("elastic_stress", "von_mises_elastic")):
+            if scalar in want:
+                out[scalar] = von_mises_array(out[tensor], self.d, zz[tensor])
+        return out
+
+    def write(self, t: float) -> None:
+        """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays)."""
+        if self.series is None:
+            return
+        cells = self.cell_fields()
+        values = {}
+        for name in self.names:
+            if name == "displacement":
+                values[name] = vector3(self.rows.rows(self._node_fields[name]()))
+            elif name == "damage":
+                values[name] = self.rows.rows(self._node_fields[name]())
+            else:
+                values[name] = (tensor6(cells[name], self.d, cells.get(name + "_zz")) if name in ("stress", "elastic_stress")
+                                else cells[name])
+        try:
+            self.series.write(t, values)
+        except SeriesError as exc:
+            raise OutputError(str(exc), exc.t) from None
+
+    def flush(self) -> None:
+        """Wait until every level is written (they are written in the background); raise a failed one's OutputError."""
+        if self.series is not None:
+            try:
+                self.series.flush()
+            except SeriesError as exc:
+                raise OutputError(str(exc), exc.t) from None
+
+    def close(self, quiet: bool = False) -> None:
+        """Finish the series; ``quiet``: a failure is not raised (another one is already on its way)."""
+        if self.series is None:
+            return
+        try:
+            self.series.close()
+        except SeriesError as exc:
+            if not quiet:
+                raise OutputError(str(exc), exc.t) from None
+
+
+def _vertex_values(f: fem.Function):
+    """A callable giving f itself if P1, else a P1 function holding f's values at the vertices (updated per call)."""
+    if f.function_space.ufl_element().degree() == 1:
+        return lambda: f
+    el = f.function_space.ufl_element()
+    mesh = f.function_space.mesh
+    V1 = (fem.VectorFunctionSpace(mesh, ("CG", 1), dim=el.value_shape()[0]) if el.value_shape()
+          else fem.FunctionSpace(mesh, ("CG", 1)))
+    out = fem.Function(V1, name=f.name)
+
+    def update() -> fem.Function:
+        out.interpolate(f)
+        return out
+
+    return update

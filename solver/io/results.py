@@ -1,0 +1,95 @@
+"""A run written to a results directory: the fields, the CSV time series, checkpoints and restart.
+
+:func:`run` drives :func:`solver.run.stepper.levels` and writes what it yields:
+``solution.xdmf`` + ``fields/`` (sigma_n = A eps(u_n) + M_n and the rest, :mod:`solver.io.fields`),
+``timeseries.csv`` (one row a level), ``config.toml`` (the resolved scene) and
+``checkpoint.h5`` every ``output.checkpoint_every`` levels.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from solver.config import dumps
+from solver.errors import OutputError, SolveFailure
+from solver.io import checkpoint
+from solver.io.fields import Outputs
+from solver.io.files import on_rank0, write_text_atomic
+from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS, CSVWriter
+from solver.run.model import Model
+from solver.run.stepper import levels, writes_level
+
+
+def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
+        restart: bool = False, sensors: tuple = ()) -> list[dict]:
+    """Run the model's scene; write results to ``outdir`` (None: nothing written). Returns the rows.
+
+    With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
+    after it: the CSV keeps its rows up to the checkpoint, the XDMF series its levels up to
+    it, and the new levels are appended. A write that fails (a full disk) stops the run with
+    an OutputError that knows the step; what was written before stays readable.
+
+    ``sensors``: as for :func:`solver.run.stepper.levels`; their columns go to the CSV too.
+    """
+    cfg, comm = model.cfg, model.comm
+    steps = cfg.time.steps
+    start, part, keep, keep_until = 0, 0, None, None
+    if restart:
+        ckpt = checkpoint.read(outdir, model)
+        start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
+        if comm.rank == 0:
+            keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
+    if outdir is not None:
+        on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
+    written = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
+    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, written, keep_until)
+    columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+               + tuple(c for s in sensors for c in s.columns))
+    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
+    every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
+    rows: list[dict] = []
+    finished = False
+    try:
+        for row in levels(model, start, sensors):
+            n = row["step"]
+            try:
+                t0 = time.perf_counter()
+                if writes_level(n, steps, cfg.output.every):
+                    out.write(row["t"])  # handed to the background writer (solver/io/xdmf.py)
+                row["time_output"] = time.perf_counter() - t0
+                row["wall_time"] += row["time_output"]
+                rows.append(row)
+                if csv is not None:
+                    on_rank0(comm, lambda row=row: csv.write(row))
+                if every_ckpt and n < steps and n % every_ckpt == 0:
+                    out.flush()  # a checkpoint never runs ahead of the written series
+                    checkpoint.write(outdir, model, n, row["t"], part)
+            except SolveFailure as exc:
+                raise _located(exc, n, row["t"], cfg.time.k) from None
+            if on_step is not None:
+                on_step(row)
+        try:
+            out.close()
+        except SolveFailure as exc:
+            raise _located(exc, steps, steps * cfg.time.k, cfg.time.k) from None
+        finished = True
+    finally:
+        out.close(quiet=not finished)
+        if csv is not None:
+            csv.close()
+    return rows
+
+
+def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:
+    """The failure at level n, or, for a write done in the background, at the level whose write failed."""
+    if isinstance(exc, OutputError) and exc.level_t is not None:
+        return exc.at(round(exc.level_t / k), exc.level_t)
+    return exc.at(n, t)
+
+
+def _csv_lines_until(path: Path, step: int) -> list[str]:
+    """The data lines of a timeseries.csv with step <= ``step``, as written (complete lines only)."""
+    lines = path.read_text().splitlines(keepends=True)[1:] if path.exists() else []
+    return [ln for ln in lines if ln.endswith("\n") and int(ln.split(",", 1)[0]) <= step]

@@ -1,0 +1,77 @@
+"""Transfer between meshes: a function's values and gradients at arbitrary points as sparse matrices.
+
+A run's fields are carried to other points (a finer or an adapted mesh's dofs, an error
+estimator's probes) by the run's basis tabulated at those points: exact where the meshes
+nest and the source degree is at most the target's. 2-D affine triangles, this process.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def locate(mesh, points: np.ndarray):
+    """The cell holding each point (2-D affine triangles), the cell's Jacobian (columns: edges) and the point's
+    reference coordinates; raises ValueError if a point lies outside this process's cells."""
+    from dolfinx import geometry
+
+    tdim = mesh.topology.dim
+    pts = np.zeros((len(points), 3))
+    pts[:, : points.shape[1]] = points
+    tree = geometry.BoundingBoxTree(mesh, tdim)
+    colliding = geometry.compute_colliding_cells(mesh, geometry.compute_collisions(tree, pts), pts)
+    offsets = colliding.offsets
+    if np.any(np.diff(offsets) == 0):
+        raise ValueError("a point lies outside the mesh")
+    cells = colliding.array[offsets[:-1]]
+    gdofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[cells]
+    X = mesh.geometry.x[gdofs][:, :, :2]  # (point, vertex, xy)
+    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
+    ref = np.linalg.solve(J, (pts[:, :2] - X[:, 0])[:, :, None])[:, :, 0]
+    return cells, J, ref
+
+
+def tabulated(V, points: np.ndarray, derivatives: int):
+    """V's element basis (and its reference derivatives up to ``derivatives``) at located points, with what a
+    sparse matrix over V's local nodes needs: (cells' Jacobians, table (deriv, point, local dof), rows, cols,
+    number of columns)."""
+    import basix
+
+    cells, J, ref = locate(V.mesh, points)
+    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, V.ufl_element().degree(),
+                                   basix.LagrangeVariant.gll_warped)
+    tab = element.tabulate(derivatives, ref)[:, :, :, 0]
+    ndofs = tab.shape[2]
+    cols = V.dofmap.list.array.reshape(-1, ndofs)[cells].ravel()
+    rows = np.repeat(np.arange(len(points)), ndofs)
+    size = V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts
+    return J, tab, rows, cols, size
+
+
+def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
+    """Rows: points; columns: the nodes of V (a Lagrange space on affine triangles, this process; for a vector
+    space the matrix acts on each component: P @ u.reshape(-1, bs)).
+
+    Each point is located in a cell of V's mesh (bounding-box tree), mapped to the reference
+    triangle, and V's element basis is tabulated there.
+    """
+    _, tab, rows, cols, size = tabulated(V, points, 0)
+    P = sp.csr_matrix((tab[0].ravel(), (rows, cols)), shape=(len(points), size))
+    P.eliminate_zeros()
+    return P
+
+
+def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(Dx, Dy): rows: points; columns: the nodes of V (a Lagrange space on affine triangles); Dx @ u gives
+    du/dx at the points (componentwise for a vector space, as :func:`interpolation_matrix`)."""
+    J, tab, rows, cols, size = tabulated(V, points, 1)
+    Jinv_T = np.transpose(np.linalg.inv(J), (0, 2, 1))  # grad_x = J^{-T} grad_X
+    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab[1:])  # (x/y, point, local dof)
+    return tuple(sp.csr_matrix((grads[i].ravel(), (rows, cols)), shape=(len(points), size)) for i in range(2))
+
+
+def petsc_to_scipy(A) -> sp.csr_matrix:
+    """A PETSc AIJ matrix (this process's rows) as a scipy CSR matrix."""
+    ai, aj, av = A.getValuesCSR()
+    return sp.csr_matrix((av, aj, ai), shape=A.getSize())

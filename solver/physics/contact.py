@@ -1,0 +1,155 @@
+"""Frictionless normal compliance on the contact parts (docs/model.md §1, §3.3): -sigma_nu = p(u_nu - g).
+
+The law p of each part (``law``): linear p(r) = r_+ / mu (the paper's), power p(r) = c r_+^m,
+or limited penetration p(r) = r_+ / mu + (r - d)_+ / mu_stiff. UFL differentiates
+``max_value`` to the Heaviside, which is the semismooth Newton's generalized derivative
+(H(u_nu - g) / mu for the linear law). The gap is a number or piecewise linear in one
+coordinate, the same function here (UFL) and at the points (:func:`gap_values`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from solver.config import BoundaryConfig
+from solver.config.boundary import AXES
+from solver.mesh.geometry import Geometry
+from solver.physics.operators import assemble_without_diagonal
+
+
+def normal_compliance(r, mu: float):
+    """p(r) = max(r, 0) / mu."""
+    return ufl.max_value(r, 0.0) / mu
+
+
+def compliance(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Expr:
+    """p(r) of the part's law (linear: exactly :func:`normal_compliance`)."""
+    if part.law == "linear":
+        return normal_compliance(r, part.mu)
+    if part.law == "power":
+        return part.coefficient * ufl.max_value(r, 0.0) ** part.exponent
+    return normal_compliance(r, part.mu) + ufl.max_value(r - part.depth, 0.0) / part.mu_stiff
+
+
+def penetration(u, n, gap):
+    """u_nu - g (> 0 is interpenetration)."""
+    return ufl.dot(u, n) - gap
+
+
+def gap_function(part: BoundaryConfig, mesh) -> float | ufl.core.expr.Expr:
+    """The part's gap: its number, or its table [s, g] as g_0 + sum of ramps clamped to [s_i, s_{i+1}]
+    (piecewise linear, constant beyond the table) in the coordinate ``gap_coordinate``."""
+    if not part.gap_table:
+        return part.gap
+    s = ufl.SpatialCoordinate(mesh)[AXES.index(part.gap_coordinate)]
+    rows = part.gap_table
+    g = rows[0][1]
+    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
+        g = g + (g1 - g0) / (s1 - s0) * (ufl.min_value(ufl.max_value(s, s0), s1) - s0)
+    return g
+
+
+def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
+    """:func:`gap_function` at points x (n, gdim): the same ramps in numpy."""
+    if not part.gap_table:
+        return np.full(len(x), part.gap)
+    s = x[:, AXES.index(part.gap_coordinate)]
+    rows = part.gap_table
+    g = np.full(len(x), rows[0][1])
+    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
+        g = g + (g1 - g0) / (s1 - s0) * (np.minimum(np.maximum(s, s0), s1) - s0)
+    return g
+
+
+def _ds(geo: Geometry, part: BoundaryConfig, degree: int):
+    return geo.ds(geo.tags[part.name], metadata={"quadrature_degree": degree})
+
+
+def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+    """j(u, w) = sum over contact parts of int p(u_nu - g) w_nu ds."""
+    n = ufl.FacetNormal(geo.mesh)
+    return sum(
+        compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
+    )
+
+
+def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+    """Total normal contact force int p(u_nu - g) ds (a functional)."""
+    n = ufl.FacetNormal(geo.mesh)
+    return sum(compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * _ds(geo, p, degree) for p in parts)
+
+
+def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+    """Length (area) of the contact zone where u_nu - g > 0, at the facet quadrature points."""
+    n = ufl.FacetNormal(geo.mesh)
+    return sum(
+        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo.mesh)), 0.0), 1.0, 0.0) * _ds(geo, p, degree)
+        for p in parts
+    )
+
+
+class ContactTerm:
+    """j(u, w) as a residual term and its Jacobian C, with C's active set tracked between calls.
+
+    With the linear and limited-penetration laws the problem is piecewise linear, so C changes
+    only when the active set does; with the power law it changes with u. A fingerprint C r
+    (r a fixed random vector) tells whether C changed: a missed change could cost Newton
+    iterations, never accuracy (the residual decides convergence). ``piecewise_linear``: no part has
+    the power law, so a Newton iterate depends only on the active set it was computed from.
+    """
+
+    def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
+                 degree: int, bcs) -> None:
+        du, w = arguments
+        Fc = residual(u, w, geo, parts, degree)
+        self.residual_form = fem.form(Fc)
+        self.jacobian_ufl = ufl.derivative(Fc, u, du)
+        self.jacobian_form = fem.form(self.jacobian_ufl)
+        self.C = fpetsc.create_matrix(self.jacobian_form)
+        self.bcs = bcs
+        self.comm = geo.comm
+        self._probe = self.C.createVecRight()
+        self._probe.setRandom(PETSc.Random().create(comm=geo.comm))
+        self._print = self.C.createVecLeft()
+        self._last: np.ndarray | None = None
+        self.piecewise_linear = all(p.law != "power" for p in parts)
+
+    def add_residual(self, F: PETSc.Vec) -> float:
+        """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""
+        fpetsc.assemble_vector(F, self.residual_form)
+        F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fpetsc.set_bc(F, self.bcs, scale=0.0)
+        return F.norm()
+
+    def _fingerprint_at(self) -> np.ndarray:
+        """C assembled at the current u, and this rank's part of its fingerprint C r (a view: copy to keep it)."""
+        assemble_without_diagonal(self.C, self.jacobian_form, self.bcs)
+        self.C.mult(self._probe, self._print)
+        return self._print.array_r
+
+    def assemble_jacobian(self) -> bool:
+        """Assemble C at the current u; True if the active set (C) changed since the last call."""
+        values = self._fingerprint_at()
+        changed = self._last is None or not np.array_equal(values, self._last)
+        changed = self.comm.allreduce(changed, op=MPI.LOR)
+        if changed:
+            self._last = values.copy()
+        return changed
+
+    def fingerprint(self) -> bytes:
+        """This rank's part of the last assembled C's fingerprint (it identifies the active set)."""
+        return b"" if self._last is None else self._last.tobytes()
+
+    def active_set_at(self) -> bytes:
+        """This rank's fingerprint of the active set at the current u, C assembled there (the last one recorded
+        is left as it is: the next :meth:`assemble_jacobian` compares with it)."""
+        return self._fingerprint_at().tobytes()
+
+    def forget(self) -> None:
+        """Treat the next Jacobian as new (after a restart: the matrix must be rebuilt)."""
+        self._last = None

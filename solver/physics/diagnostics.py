@@ -1,0 +1,160 @@
+"""Per-level diagnostics of the displacement: contact force and zone, penetration, ||eps(u)||, reactions.
+
+Functionals of the contact term are integrated with the same facet rule as the term
+itself; ||eps(u)||_L2 from the strain at the memory points where the scene has memory (that
+strain is the next commit's, so the norm is one pass over the points), else sqrt(u . G u) with
+the strain Gram matrix G assembled once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from solver.config import BoundaryConfig
+from solver.mesh.geometry import Geometry
+from solver.physics import contact
+from solver.physics.contact_points import ContactPoints
+from solver.physics.displacement import DisplacementProblem
+from solver.physics.material import strain
+
+
+class Reactions:
+    """The force each Dirichlet part exerts on the body to hold it, per prescribed component.
+
+    R = K_full u + j(u) + B M_n (+ the trapezoid's implicit memory term) - (f_n, w): the residual
+    with no Dirichlet row replaced, so on a Dirichlet dof it is the force the support must add
+    for equilibrium. Summed over the dofs the part carries (:class:`operators.Dirichlet`); K_full
+    is kept as its Dirichlet rows only, so the product costs their entries alone.
+    """
+
+    def __init__(self, problem: DisplacementProblem) -> None:
+        self.problem = problem
+        self.comm = problem.u.function_space.mesh.comm
+        ops = problem.ops
+        self.dirichlet = ops.dirichlet
+        self.columns = self.dirichlet.columns
+        K = fpetsc.assemble_matrix(ops.bulk_form)  # no Dirichlet rows or columns removed
+        K.assemble()
+        # only the Dirichlet rows of K u are needed: keep those (local row j is the owned dof constrained[j])
+        start, end = K.getOwnershipRange()
+        constrained = self.dirichlet.constrained
+        rows = PETSc.IS().createGeneral((constrained + start).astype(PETSc.IntType), comm=self.comm)
+        cols = PETSc.IS().createStride(end - start, start, 1, comm=self.comm)
+        self.K = K.createSubMatrix(rows, cols)
+        K.destroy()
+        self.Ku = self.K.createVecLeft()
+        self.position = {key: np.searchsorted(constrained, dofs) for key, dofs in self.dirichlet.dofs.items()}
+        self.R = ops.b.duplicate()
+        self.contact_form = problem.contact.residual_form if problem.contact is not None else None
+
+    def row(self) -> dict[str, float]:
+        ops, R = self.problem.ops, self.R
+        with R.localForm() as r:
+            r.set(0.0)
+        for form in (self.contact_form, self.problem.Fm):
+            if form is not None:
+                fpetsc.assemble_vector(R, form)
+        R.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if ops.memory_force is not None:
+            R.axpy(1.0, ops.memory_force)
+        R.axpy(-1.0, ops.loads)
+        self.K.mult(self.problem.u.vector, self.Ku)
+        values, Ku = R.array_r, self.Ku.array_r
+        local = np.array([values[dofs].sum() + Ku[self.position[key]].sum() for key, dofs in self.dirichlet.dofs.items()])
+        total = self.comm.allreduce(local, op=MPI.SUM) if len(local) else local
+        return dict(zip(self.dirichlet.dofs, (float(v) for v in total)))
+
+
+class DisplacementDiagnostics:
+    """What the time series reports about u at each level (all values the same on every rank)."""
+
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
+                 points: ContactPoints | None, reactions: Reactions | None = None,
+                 strain_norm: Callable[[], float] | None = None) -> None:
+        self.geo, self.u, self.points, self.reactions = geo, u, points, reactions
+        self._point_norm = strain_norm  # ||eps(u)|| at the memory points (memory.PointStrainNorm), if exact there
+        self.has_contact = bool(parts)
+        self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
+        self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
+        self.gram = None
+        if strain_norm is None:
+            V = u.function_space
+            du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
+            self.gram = fpetsc.assemble_matrix(fem.form(ufl.inner(strain(du), strain(w)) * ufl.dx))
+            self.gram.assemble()
+            self._work = self.gram.createVecLeft()
+
+    def _integral(self, form) -> float:
+        return 0.0 if form is None else self.geo.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
+
+    def contact_force(self) -> float:
+        """Total normal contact force int p(u_nu - g) ds."""
+        return self._integral(self.force_form)
+
+    def contact_length(self) -> float:
+        """Length (area) of the zone where u_nu > g, at the facet quadrature points."""
+        return self._integral(self.length_form)
+
+    def max_penetration(self) -> float:
+        """Largest u_nu - g over the contact quadrature points (0 without contact, NaN in 3-D: not computed)."""
+        if self.points is not None:
+            return self.points.max_penetration(self.u.x.array)
+        return float("nan") if self.has_contact else 0.0
+
+    def strain_norm(self) -> float:
+        """||eps(u)||_L2: at the memory points where given, else sqrt(u . G u)."""
+        if self._point_norm is not None:
+            return self._point_norm()
+        self.gram.mult(self.u.vector, self._work)
+        return float(np.sqrt(max(self._work.dot(self.u.vector), 0.0)))
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The reaction columns (the fixed ones are io.CSV_COLUMNS)."""
+        return self.reactions.columns if self.reactions is not None else ()
+
+    def row(self) -> dict[str, float]:
+        out = {"contact_force": self.contact_force(), "contact_length": self.contact_length(),
+               "max_penetration": self.max_penetration(), "strain_norm": self.strain_norm()}
+        if self.reactions is not None:
+            out.update(self.reactions.row())
+        return out
+
+
+class DamageDiagnostics:
+    """Range and L2 norm of zeta at each level (a constant zeta0 when the scene has no damage)."""
+
+    def __init__(self, mesh, damage, zeta0: float) -> None:
+        self.comm = mesh.comm
+        self.zeta = damage.zeta if damage is not None else None
+        self.zeta0 = zeta0
+        if self.zeta is not None:  # ||zeta||^2 = zeta . M zeta, with the mass matrix assembled once
+            Z = self.zeta.function_space
+            z, xi = ufl.TrialFunction(Z), ufl.TestFunction(Z)
+            self.mass = fpetsc.assemble_matrix(fem.form(z * xi * ufl.dx))
+            self.mass.assemble()
+            self._work = self.mass.createVecLeft()
+        else:
+            area = self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * ufl.dx(domain=mesh))), op=MPI.SUM)
+            self._constant_norm = zeta0 * float(np.sqrt(area))
+
+    def zeta_range(self) -> tuple[float, float]:
+        if self.zeta is None:
+            return self.zeta0, self.zeta0
+        n = self.zeta.function_space.dofmap.index_map.size_local
+        a = self.zeta.x.array[:n]
+        return (self.comm.allreduce(float(a.min()) if n else np.inf, op=MPI.MIN),
+                self.comm.allreduce(float(a.max()) if n else -np.inf, op=MPI.MAX))
+
+    def zeta_norm(self) -> float:
+        if self.zeta is None:
+            return self._constant_norm
+        self.mass.mult(self.zeta.vector, self._work)
+        return float(np.sqrt(max(self._work.dot(self.zeta.vector), 0.0)))

@@ -1,0 +1,148 @@
+"""Pictures of a results directory (``python -m solver plot DIR``), read from what the run wrote
+(``solution.xdmf`` and the data it points to).
+
+- ``von_mises_elastic_{initial,final}.png``: the von Mises norm of A eps(u) over the deformed
+  configuration (warp factor in the title), like the paper's Figs. 5 and 8, and
+  ``von_mises_{initial,final}.png`` for the total stress sigma;
+- ``damage_final.png``: the damage at the final time (Figs. 6 and 9);
+- ``timeseries.png``: contact force, minimum damage and ||eps(u)|| against time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from solver.post.results import read_csv, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
+
+
+def _grid(res: dict, t: float, warp: float):
+    import pyvista as pv
+
+    x = np.zeros((res["geometry"].shape[0], 3))
+    x[:, : res["geometry"].shape[1]] = res["geometry"]
+    u = res["fields"]["displacement"][t]
+    x[:, : u.shape[1]] += warp * u[:, : x.shape[1]]
+    cells = res["topology"]
+    kind = {3: pv.CellType.TRIANGLE, 4: pv.CellType.TETRA}[cells.shape[1]]
+    conn = np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).ravel()
+    return pv.UnstructuredGrid(conn, np.full(len(cells), kind, dtype=np.uint8), x)
+
+
+def auto_warp(res: dict) -> float:
+    """Largest displacement drawn as 10 % of the body's size (rounded to 1, 2 or 5 x 10^m)."""
+    size = np.ptp(res["geometry"], axis=0).max()
+    umax = max(np.abs(v).max() for v in res["fields"]["displacement"].values())
+    if umax == 0:
+        return 1.0
+    w = 0.1 * size / umax
+    e = 10 ** np.floor(np.log10(w))
+    return float(max(m for m in (1, 2, 5) if m * e <= w) * e)
+
+
+def render(res: dict, field: str, t: float, warp: float, path: Path, title: str, clim=None, cmap="viridis") -> None:
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    grid = _grid(res, t, warp)
+    values = res["fields"][field][t]
+    if values.ndim > 1:
+        values = values[:, 0]
+    if len(values) == grid.n_cells:
+        grid.cell_data[field] = values
+    else:
+        grid.point_data[field] = values
+    outline = _grid(res, t, 0.0)
+    solid = res["topology"].shape[1] == 4
+    if solid:  # 3-D: the body's edges (30-degree feature edges of its surface), seen from above a corner
+        edges = outline.extract_surface().extract_feature_edges(feature_angle=30, boundary_edges=False,
+                                                                 feature_edges=True, manifold_edges=False)
+    else:
+        edges = outline.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False)
+    p = pv.Plotter(off_screen=True, window_size=(900, 650))
+    p.add_mesh(edges, color="gray", line_width=1)
+    p.add_mesh(grid, scalars=field, cmap=cmap, clim=clim, show_edges=False,
+               scalar_bar_args={"title": field.replace("_", " "), "vertical": False, "fmt": "%.3g",
+                                "position_x": 0.2, "position_y": 0.04, "width": 0.6, "height": 0.08})
+    p.add_text(f"{title}\nt = {t:g}, displacement x {warp:g} (grey: undeformed)", font_size=11)
+    if solid:
+        p.view_isometric()
+        p.camera.zoom(1.1)
+    else:
+        p.view_xy()
+        p.camera.zoom(1.25)
+    p.screenshot(str(path))
+    p.close()
+
+
+def timeseries(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = [r["t"] for r in rows]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    for ax, key, label in zip(axes, ("contact_force", "zeta_min", "strain_norm"),
+                              ("contact force  $\\int_{\\Gamma_C} p\\,ds$", "min damage $\\zeta$",
+                               "$\\|\\varepsilon(u)\\|_{L^2}$")):
+        ax.plot(t, [r[key] for r in rows], "-")
+        ax.set_xlabel("t")
+        ax.set_title(label)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_results(directory: str | Path, warp: float | None = None, out: str | Path | None = None,
+                 extra_times: tuple[float, ...] = ()) -> list[Path]:
+    """Write the PNGs of a results directory (plus von Mises at ``extra_times``); returns their paths."""
+    directory = Path(directory)
+    out = Path(out) if out else directory
+    out.mkdir(parents=True, exist_ok=True)
+    res = read_results(directory)
+    times = res["times"]
+    w = warp if warp is not None else auto_warp(res)
+    made = []
+    for field, what in (("von_mises_elastic", "A eps(u)"), ("von_mises", "sigma = A eps(u) + memory")):
+        if field not in res["fields"]:
+            continue
+        vm = res["fields"][field]
+        clim = (0.0, max(float(np.max(v)) for v in vm.values()))  # one colour scale for both times
+        picks = [("initial", times[0]), ("final", times[-1])]
+        for t in extra_times:
+            near = min(times, key=lambda s, t=t: abs(s - t))
+            picks.append((f"t{near:g}".replace(".", "_"), near))
+        for label, t in picks:
+            path = out / f"{field}_{label}.png"
+            render(res, field, t, w, path, f"von Mises norm of {what} ({label})", clim=clim, cmap="turbo")
+            made.append(path)
+    if "damage" in res["fields"]:
+        path = out / "damage_final.png"
+        render(res, "damage", times[-1], w, path, "damage zeta (final)", cmap="magma")
+        made.append(path)
+    csv_path = directory / "timeseries.csv"
+    if csv_path.exists():
+        path = out / "timeseries.png"
+        timeseries(read_csv(csv_path), path)
+        made.append(path)
+    return made
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="solver plot", description="PNG pictures of a results directory")
+    p.add_argument("directory")
+    p.add_argument("--warp", type=float, default=None, help="displacement scale (default: automatic, stated in the title)")
+    p.add_argument("--output", default=None, help="where to write the PNGs (default: the results directory)")
+    p.add_argument("--times", type=float, nargs="*", default=[], help="also draw von Mises at these written times")
+    args = p.parse_args(argv)
+    if not (Path(args.directory) / "solution.xdmf").exists():
+        print(f"error: {args.directory}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
+        return 2
+    for path in plot_results(args.directory, args.warp, args.output, tuple(args.times)):
+        print(path)
+    return 0

@@ -1,0 +1,249 @@
+"""PETSc options, factored direct solvers and preconditioned Krylov solvers shared by the physics modules.
+
+Each solver has its own options prefix (``mech_`` for the displacement SNES
+and its KSP, ``damage_`` for the damage KSP) so that a scene's
+``[solver.petsc_options]`` can tune one without touching the other.
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+
+import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from solver.errors import ConfigError
+
+# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on.
+# Measured on 3-D Example 1, one rank (benchmarks/results/auto_3d/scaling.md): a 50-step run (the example's)
+# takes 1.2 s with MUMPS and 1.3 s iteratively at 6,591 dofs, 3.7 s and 2.6 s at 10,125, 57 s and 23 s at 59,049
+AUTO_ITERATIVE_DOFS_3D = 10_000
+
+
+def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton") -> str:
+    """The linear solver ``solver.linear = kind`` stands for on a mesh of dimension ``dim`` with ``dofs``
+    displacement dofs (global): ``kind`` itself unless it is ``auto``.
+
+    ``auto`` in 2-D: the sequential Cholesky on one process, solved redundantly on up to 4 ranks, MUMPS beyond
+    (:func:`direct_options`). In 3-D a sparse factorization fills much more: MUMPS below
+    ``AUTO_ITERATIVE_DOFS_3D`` dofs, the iterative solver from there on (Newton only: the fixed-point
+    methods re-solve one factored matrix many times).
+    """
+    if kind != "auto":
+        return kind
+    if dim == 3:
+        return "iterative" if method == "newton" and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
+    return _auto_direct(comm)
+
+
+def _auto_direct(comm: MPI.Comm) -> str:
+    return "petsc" if comm.size == 1 else "redundant" if comm.size <= 4 else "mumps"
+
+
+def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -> dict[str, str]:
+    """A sparse Cholesky factorization of an SPD matrix, factored once and reused.
+
+    ``petsc``: PETSc's sequential Cholesky with nested dissection (one process only);
+    ``redundant``: every rank holds the whole matrix and solves it with ``petsc``;
+    ``mumps``: MUMPS's distributed Cholesky. ``auto`` picks ``petsc`` on one process,
+    ``redundant`` on up to 4 and ``mumps`` beyond. Measured here (n = 256, 2 ranks, see
+    benchmarks): a MUMPS triangular solve costs 27 ms against 14-18 ms for the sequential
+    one, so on a few ranks it is faster to solve redundantly and share the rest of the work.
+    """
+    if kind == "auto":
+        kind = _auto_direct(comm)
+    if kind == "petsc" and comm.size > 1:
+        kind = "redundant"
+    factor = "cholesky" if symmetric else "lu"
+    seq = {"pc_type": factor, "pc_factor_mat_solver_type": "petsc", "pc_factor_mat_ordering_type": "nd"}
+    if kind == "petsc":
+        return {"ksp_type": "preonly", **seq}
+    if kind == "redundant":
+        opts = {"ksp_type": "preonly", "pc_type": "redundant", "pc_redundant_number": str(comm.size)}
+        opts.update({f"redundant_{k}": v for k, v in seq.items()})
+        return opts
+    # MUMPS's workspace: its estimate + 50 % (ICNTL(14), default 20 %). On 2 ranks the damage matrix of 3-D
+    # Example 1 (n = 14) failed about one factorization in 15 with INFOG(1) = -9 (workspace too small) at 20 %
+    return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps", "mat_mumps_icntl_14": "50"}
+
+
+# Krylov tolerances relative to the Newton tolerance rtol (see iterative_options)
+KSP_RTOL_FACTOR = 0.1
+
+
+# the displacement's preconditioner in 3-D Example 1 (scripts/amg_3d.py, benchmarks/results/amg_3d.md): Trilinos ML
+# (smoothed aggregation, rigid-body near-nullspace) took the least time per step from 24^3 dofs on; GAMG with plain
+# aggregation (smoothed aggregation turns indefinite under the contact penalty) where PETSc was built without ML
+SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
+AMG = {
+    "ml": {"pc_type": "ml", **SMOOTHER},
+    "gamg": {"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "0", **SMOOTHER},
+}
+# Fischer's initial guess: each solve starts from the projection of its right-hand side on the last 10 solutions
+# (reset when the matrix changes); the steps of a level sequence have slowly changing right-hand sides
+GUESS = {"ksp_guess_type": "fischer", "ksp_guess_fischer_model": "1,10"}
+
+
+def default_amg() -> str:
+    """``ml`` if this PETSc has Trilinos ML, else ``gamg``."""
+    return "ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg"
+
+
+def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg: str | None = None) -> dict[str, str]:
+    """CG (GMRES if the matrix is not symmetric) with algebraic multigrid for the displacement (``elasticity``;
+    ``amg`` = ``ml`` or ``gamg``, default :func:`default_amg`; the rigid-body near-nullspace comes from
+    :func:`rigid_body_modes`) and Fischer's initial guess, or Jacobi for the damage's mass-plus-diffusion matrix,
+    whose diagonal dominates.
+
+    The Krylov tolerance is tied to the Newton tolerance ``rtol``: a linear solve stops when its true
+    (unpreconditioned) residual is below ``0.1 rtol`` times its right-hand side (the Newton solver also stops
+    it at ``0.1 rtol`` times the level's force scale, the Newton test's own tolerance). The Newton residual
+    test (||F|| <= rtol * scale, evaluated with the exact F) still decides convergence; an inexact step can
+    only cost an extra Newton iteration, not accuracy. The preconditioner is set up again only when PETSc sees
+    the matrix modified (the Jacobian changes only with the contact active set), like a factorization.
+    """
+    opts = {"ksp_type": "cg" if symmetric else "gmres", "ksp_rtol": repr(KSP_RTOL_FACTOR * rtol),
+            "ksp_atol": "0.0", "ksp_norm_type": "unpreconditioned", "ksp_max_it": "2000"}
+    if not symmetric:
+        opts["ksp_gmres_restart"] = "200"
+    if elasticity:
+        opts.update(AMG[amg or default_amg()])
+        if symmetric:  # Fischer's projection is in the energy norm of an SPD matrix
+            opts.update(GUESS)
+    else:
+        opts["pc_type"] = "jacobi"
+    return opts
+
+
+def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elasticity: bool) -> dict[str, str]:
+    """The options of ``solver.linear = kind``: a direct factorization, or ``iterative``."""
+    if kind == "iterative":
+        return iterative_options(rtol, elasticity, symmetric)
+    return direct_options(comm, kind, symmetric)
+
+
+def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
+    """The rigid motions of a vector P-k space (3 in 2-D, 6 in 3-D), orthonormalized: GAMG's near-nullspace
+    (built as in dolfinx's demo_elasticity.py)."""
+    from dolfinx import la
+
+    imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    dim = V.mesh.geometry.dim
+    nmodes = 3 if dim == 2 else 6
+    basis = [la.create_petsc_vector(imap, bs) for _ in range(nmodes)]
+    x = V.tabulate_dof_coordinates()  # one row per node, ghosts included (like the local form)
+    with ExitStack() as stack:
+        vecs = [np.asarray(stack.enter_context(b.localForm())) for b in basis]
+        dofs = [V.sub(i).dofmap.list.array for i in range(dim)]
+        for i in range(dim):  # translations
+            vecs[i][dofs[i]] = 1.0
+        xs = [x[dofs[0] // bs, i] for i in range(dim)]  # the nodes of dofs[0], dofs[1], ... in one order
+        if dim == 2:
+            vecs[2][dofs[0]] = -xs[1]
+            vecs[2][dofs[1]] = xs[0]
+        else:
+            for m, (a, b) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
+                vecs[m][dofs[a]] = -xs[b]
+                vecs[m][dofs[b]] = xs[a]
+    la.orthonormalize(basis)
+    return PETSc.NullSpace().create(vectors=basis, comm=V.mesh.comm)
+
+
+def set_options(prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...]) -> None:
+    """Write defaults under ``prefix``, then the scene's own options (full names) on top."""
+    opts = PETSc.Options()
+    for key, value in defaults.items():
+        opts[f"{prefix}{key}"] = value
+    for key, value in user:
+        if key.startswith(prefix):
+            opts[key.lstrip("-")] = value
+
+
+def clear_options(prefix: str, keys) -> None:
+    """Remove options written by :func:`set_options` (so runs in one process do not leak)."""
+    opts = PETSc.Options()
+    for key in keys:
+        name = f"{prefix}{key}"
+        if opts.hasName(name):
+            opts.delValue(name)
+
+
+def check_options(comm: MPI.Comm, prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...],
+                  snes: bool = False) -> None:
+    """Raise a ConfigError naming the scene's option under ``prefix`` that PETSc rejects (an unknown
+    type, a value of the wrong kind, a factorization package that is not there).
+
+    The options are tried on a small stand-in: a KSP (or SNES) with the same prefix on a diagonal
+    matrix, set up so that the preconditioner's factorization is created. The culprit is found by
+    trying the scene's options one at a time.
+    """
+    mine = tuple((k, v) for k, v in user if k.lstrip("-").startswith(prefix))
+    if not mine:
+        return
+    reason = _probe(comm, prefix, defaults, mine, snes)
+    if reason is None:
+        return
+    for key, value in mine:
+        alone = _probe(comm, prefix, defaults, ((key, value),), snes)
+        if alone is not None:
+            raise ConfigError(key=f"solver.petsc_options.{key}", value=value, allowed=f"PETSc rejects it: {alone}")
+    raise ConfigError(key="solver.petsc_options", value=dict(mine), allowed=f"PETSc rejects them together: {reason}")
+
+
+def _probe(comm: MPI.Comm, prefix: str, defaults: dict[str, str], user: tuple[tuple[str, str], ...],
+           snes: bool) -> str | None:
+    """None if PETSc accepts the options on a stand-in problem, else the last line of its error."""
+    set_options(prefix, defaults, user)
+    A = PETSc.Mat().createAIJ(((1, None), (1, None)), nnz=(1, 0), comm=comm)
+    start, _ = A.getOwnershipRange()
+    A.setValue(start, start, 1.0)
+    A.assemble()
+    obj = ksp = None
+    try:
+        if snes:
+            obj = PETSc.SNES().create(comm)
+            obj.setOptionsPrefix(prefix)
+            obj.setFromOptions()
+            ksp = obj.getKSP()
+        else:
+            obj = ksp = PETSc.KSP().create(comm)
+            ksp.setOptionsPrefix(prefix)
+        ksp.setOperators(A)
+        ksp.setFromOptions()
+        ksp.setUp()
+        return None
+    except PETSc.Error as exc:
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        return lines[-1].removeprefix("[0] ") if lines else f"error code {exc.ierr}"
+    finally:
+        if obj is not None:
+            obj.destroy()
+        A.destroy()
+        clear_options(prefix, defaults)
+        clear_options("", [k.lstrip("-") for k, _ in user])
+
+
+def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, str], ...],
+             kind: str = "auto", symmetric: bool = True, rtol: float = 1e-10) -> PETSc.KSP:
+    """A KSP on a matrix; with the default options it factors once, and again only if A changes
+    (``kind = 'iterative'``: Jacobi-preconditioned CG to ``0.1 rtol``, warm-started from the last solution).
+    Options PETSc rejects raise a ConfigError first (:func:`check_options`)."""
+    defaults = linear_options(comm, kind, symmetric, rtol, elasticity=False)
+    check_options(comm, prefix, defaults, user)
+    set_options(prefix, defaults, user)
+    ksp = PETSc.KSP().create(comm)
+    ksp.setOptionsPrefix(prefix)
+    ksp.setOperators(A)
+    ksp.setFromOptions()
+    if kind == "iterative":
+        ksp.setInitialGuessNonzero(True)  # x holds the last solution: the previous level's field
+    if defaults.get("pc_factor_mat_solver_type") == "mumps":
+        ksp.setUp()  # MUMPS reads its mat_mumps_* options when it factors: factor while they are set
+    clear_options(prefix, defaults)
+    return ksp
+
+
+REASONS_KSP = {v: k for k, v in vars(PETSc.KSP.ConvergedReason).items() if isinstance(v, int)}
+REASONS_SNES = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
