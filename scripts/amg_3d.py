@@ -71,7 +71,7 @@ def one(variant: str, n: int, steps: int) -> dict:
 
     opts, _, guess = VARIANTS[variant]
     if not guess:
-        solver.linear.GUESS.clear()  # the defaults' Fischer guess off (PETSc has no option for "no guess")
+        solver.solvers.linear.GUESS.clear()  # the defaults' Fischer guess off (PETSc has no option for "no guess")
     k = 0.02
     sets = [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", f"time.k={k}", f"time.T={k * steps}",
             "solver.linear='iterative'"] + [f"solver.petsc_options.mech_{key}='{v}'" for key, v in opts.items()]

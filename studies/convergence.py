@@ -70,9 +70,9 @@ def prolongation(nc: int, nf: int, diagonal: str) -> sp.csr_matrix:
     if diagonal not in ("right", "left"):
         raise ValueError(f"mesh.diagonal = {diagonal!r}: the exact transfer supports 'right' and 'left'")
     r = nf // nc
-    J, I = np.divmod(np.arange((nf + 1) ** 2), nf + 1)
-    ci, cj = np.minimum(I // r, nc - 1), np.minimum(J // r, nc - 1)
-    xi, eta = (I - ci * r) / r, (J - cj * r) / r
+    row, col = np.divmod(np.arange((nf + 1) ** 2), nf + 1)
+    ci, cj = np.minimum(col // r, nc - 1), np.minimum(row // r, nc - 1)
+    xi, eta = (col - ci * r) / r, (row - cj * r) / r
 
     def node(di, dj):
         return (cj + dj) * (nc + 1) + ci + di

@@ -102,7 +102,7 @@ def run_case(n: int, linear: str, steps: int) -> dict:
 def spawn(n: int, solver: str, nproc: int, steps: int, timeout: float | None) -> dict:
     """Run a case in its own process (under mpirun for nproc > 1); a failure or a timeout is returned as such."""
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
-    cmd = [sys.executable, "-m", "solver.scaling", "case", str(n), solver, str(steps)]
+    cmd = [sys.executable, "-m", "studies.scaling", "case", str(n), solver, str(steps)]
     if nproc > 1:
         cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
     base = {"n": n, "solver": solver, "nproc": nproc, "steps": steps, "dofs": dofs_of(n)}

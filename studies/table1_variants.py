@@ -163,8 +163,8 @@ def fine_forms(ref: Reference) -> list[sp.csr_matrix]:
 def injection(nc: int, nf: int) -> np.ndarray:
     """Fine grid index of each coarse grid node (nested meshes): nodal interpolation onto the coarse mesh."""
     r = nf // nc
-    J, I = np.divmod(np.arange((nc + 1) ** 2), nc + 1)
-    return (r * J) * (nf + 1) + r * I
+    row, col = np.divmod(np.arange((nc + 1) ** 2), nc + 1)
+    return (r * row) * (nf + 1) + r * col
 
 
 class Space:

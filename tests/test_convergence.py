@@ -23,9 +23,9 @@ def test_prolongation_is_exact_p1_transfer(diagonal):
     grid_c = np.empty((nc + 1) ** 2)
     grid_c[grid_order(Vc.tabulate_dof_coordinates(), corners, nc)] = f.x.array
     fine = prolongation(nc, nf, diagonal) @ grid_c
-    J, I = np.divmod(np.arange((nf + 1) ** 2), nf + 1)
+    row, col = np.divmod(np.arange((nf + 1) ** 2), nf + 1)
     for g in range(0, (nf + 1) ** 2, 7):  # the coarse P1 function evaluated by dolfinx
-        assert fine[g] == pytest.approx(point_value(f, [I[g] / nf, J[g] / nf])[0], abs=1e-13)
+        assert fine[g] == pytest.approx(point_value(f, [col[g] / nf, row[g] / nf])[0], abs=1e-13)
 
 
 def test_prolongation_refuses_non_nested():

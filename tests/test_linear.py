@@ -187,7 +187,7 @@ def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypat
     from solver.run.model import build_model
 
     assert build_model(_small_3d("auto"), comm).linear == "mumps"  # 192 dofs
-    monkeypatch.setattr(solver.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
+    monkeypatch.setattr(solver.solvers.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
     cfg = _small_3d("auto")
     model = build_model(cfg, comm)
     assert model.linear == "iterative" and model.mech.solver._project and model.damage.iterative

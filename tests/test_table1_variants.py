@@ -121,8 +121,8 @@ def test_samples_between_levels_equal_a_direct_computation(measurer):
 
 def test_restriction_is_nodal_interpolation():
     idx = injection(2, 8)
-    J, I = np.divmod(idx, 9)
-    assert np.array_equal(I, np.tile([0, 4, 8], 3)) and np.array_equal(J, np.repeat([0, 4, 8], 3))
+    row, col = np.divmod(idx, 9)
+    assert np.array_equal(col, np.tile([0, 4, 8], 3)) and np.array_equal(row, np.repeat([0, 4, 8], 3))
 
 
 def test_measurement_refuses_unknown_choices():

@@ -158,7 +158,7 @@ def parse(ctx: Ctx, t: Any, scene: dict) -> tuple[BoundaryConfig, ...]:
 def _check_rigid_motions(ctx: Ctx, parts: list[BoundaryConfig], dim: int) -> None:
     """Every direction must be prescribed by some Dirichlet part (else the body translates freely).
 
-    Rotations are checked on the mesh (:func:`solver.operators.check_rigid_motions`).
+    Rotations are checked on the mesh (:func:`solver.physics.operators.check_rigid_motions`).
     """
     for i, axis in enumerate(AXES[:dim]):
         if not any(b.fixed(dim)[i] for b in parts):

@@ -3,7 +3,7 @@
 XDMF cannot hold quadrature functions, so the stresses sigma = A eps(u) + M and A eps(u)
 are written as cell averages (the L2 projection onto piecewise constants), with their von
 Mises values. ``output.fields`` chooses which are written; only what those need is
-computed. The series itself is :class:`solver.xdmf.XDMFSeries`. P2 fields
+computed. The series itself is :class:`solver.io.xdmf.XDMFSeries`. P2 fields
 (``discretization.u_degree`` or ``zeta_degree`` = 2) are written as their P1 interpolants on
 the mesh, their exact values at the vertices: ParaView shows the vertex values the solver
 computed and interpolates linearly in between.
@@ -41,7 +41,7 @@ class CellStresses:
     and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
     of the quadrature rule that integrates it everywhere else; on affine cells its L2
     projection onto constants with that rule is the weighted mean of its point values. Rows
-    are in the local order of the owned cells (that of :func:`solver.xdmf.dolfinx_layout`).
+    are in the local order of the owned cells (that of :func:`solver.io.xdmf.dolfinx_layout`).
     In plane strain, sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
     """
 
@@ -49,22 +49,22 @@ class CellStresses:
         mesh = model.geo.mesh
         self.d = d = mesh.geometry.dim
         self.u, self.history = model.u, model.history
-        self.lam, self.mu = lame(material.E, material.nu, material.model)
+        self.lame_lambda, self.lame_mu = lame(material.E, material.nu, material.model)
         self.plane_strain = material.model == "plane_strain" and d == 2
         self._trace: np.ndarray | None = None
         self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
         E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
         eps = strain(ufl.TrialFunction(model.u.function_space))
         components = ufl.as_vector([eps[i, j] for i, j in self.pairs])
-        self.B = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
-        self.B.assemble()
+        self.strain_components = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
+        self.strain_components.assemble()
         S0 = fem.FunctionSpace(mesh, ("DG", 0))
         vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
-        scale = self.B.createVecLeft()
+        scale = self.strain_components.createVecLeft()
         n_dofs = E0.dofmap.index_map.size_local
         scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], len(self.pairs))
-        self.B.diagonalScale(L=scale)
-        self.out = self.B.createVecLeft()
+        self.strain_components.diagonalScale(L=scale)
+        self.out = self.strain_components.createVecLeft()
         imap = mesh.topology.index_map(mesh.topology.dim)
         n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
         self.cells = RowMap(E0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], len(self.pairs))  # one dof per cell
@@ -79,7 +79,7 @@ class CellStresses:
 
     def elastic(self) -> np.ndarray:
         """A eps(u) per owned cell, rows of d*d (row-major)."""
-        self.B.mult(self.u.vector, self.out)
+        self.strain_components.mult(self.u.vector, self.out)
         e = self.cells.take(self.out.array_r)
         d = self.d
         s = np.empty((len(e), d, d))
@@ -87,9 +87,9 @@ class CellStresses:
         self._trace = trace
         for k, (i, j) in enumerate(self.pairs):
             if i == j:
-                s[:, i, i] = 2.0 * self.mu * e[:, k] + self.lam * trace
+                s[:, i, i] = 2.0 * self.lame_mu * e[:, k] + self.lame_lambda * trace
             else:
-                s[:, i, j] = s[:, j, i] = 2.0 * self.mu * e[:, k]
+                s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[:, k]
         return s.reshape(len(e), d * d)
 
     def total(self, elastic: np.ndarray) -> np.ndarray:
@@ -101,7 +101,7 @@ class CellStresses:
     def out_of_plane(self) -> tuple[np.ndarray, np.ndarray]:
         """(sigma_33, (A eps)_33) per owned cell in plane strain, after :meth:`elastic`: eps_33 = 0, so
         (A eps)_33 = lambda tr eps(u), and sigma_33 adds the cell average of the memory's M_33."""
-        elastic = self.lam * self._trace
+        elastic = self.lame_lambda * self._trace
         if self.history is None:
             return elastic, elastic
         zz = self.history.out_of_plane

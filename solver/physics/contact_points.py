@@ -23,6 +23,34 @@ def _law_row(part: BoundaryConfig) -> tuple[float, float, float, float, float]:
     return 1.0 / part.mu, np.inf, 0.0, 0.0, 1.0
 
 
+def _facet_frame(facet_vertices, cell_vertices: list, dofs, x: np.ndarray):
+    """A boundary facet's end dofs (P1: local dof i sits at the cell's vertex i), outward normal, length and
+    its cell's dofs."""
+    va, vb = facet_vertices
+    da, db = dofs[cell_vertices.index(va)], dofs[cell_vertices.index(vb)]
+    xa, xb = x[da, :2], x[db, :2]
+    t = xb - xa
+    length = float(np.hypot(*t))
+    n = np.array([t[1], -t[0]]) / length
+    centre = x[dofs, :2].mean(axis=0)
+    if np.dot(centre - xa, n) > 0:  # outward
+        n = -n
+    return da, db, n, length, dofs
+
+
+def _facet_basis(element, x: np.ndarray, dofs, da, db, s: np.ndarray) -> list:
+    """Per facet point s: the (dof, basis value) pairs of the cell's basis (P1: the facet's two hat functions;
+    P2 and above: basix orders vertex dofs first, as the cell's vertices)."""
+    if element is None:
+        return [((da, 1.0 - sq), (db, sq)) for sq in s]
+    xa, t = x[da, :2], x[db, :2] - x[da, :2]
+    x0 = x[dofs[0], :2]
+    J = np.column_stack([x[dofs[1], :2] - x0, x[dofs[2], :2] - x0])
+    ref = np.linalg.solve(J, (xa + s[:, None] * t - x0).T).T
+    phi = element.tabulate(0, ref)[0, :, :, 0]
+    return [tuple(zip(dofs, phi[q])) for q in range(len(s))]
+
+
 class ContactPoints:
     """The contact term at its quadrature points: u_nu - g = N u - g and j(u) = N^T W p(N u - g).
 
@@ -62,25 +90,8 @@ class ContactPoints:
                 c = f2c.links(f)[0]
                 if c >= ncells:  # integrated by the rank that owns the cell
                     continue
-                va, vb = f2v.links(f)
-                cell_vertices = list(c2v.links(c))
-                dofs = V.dofmap.cell_dofs(c)  # P1: local dof i sits at the cell's vertex i
-                da, db = dofs[cell_vertices.index(va)], dofs[cell_vertices.index(vb)]
-                xa, xb = x[da, :2], x[db, :2]
-                t = xb - xa
-                length = float(np.hypot(*t))
-                n = np.array([t[1], -t[0]]) / length
-                centre = x[dofs, :2].mean(axis=0)
-                if np.dot(centre - xa, n) > 0:  # outward
-                    n = -n
-                if element is None:  # P1: the two hat functions of the facet
-                    basis = [((da, 1.0 - sq), (db, sq)) for sq in s]
-                else:
-                    x0 = x[dofs[0], :2]
-                    J = np.column_stack([x[dofs[1], :2] - x0, x[dofs[2], :2] - x0])
-                    ref = np.linalg.solve(J, (xa + s[:, None] * t - x0).T).T
-                    phi = element.tabulate(0, ref)[0, :, :, 0]
-                    basis = [tuple(zip(dofs, phi[q])) for q in range(len(s))]
+                da, db, n, length, dofs = _facet_frame(f2v.links(f), list(c2v.links(c)), V.dofmap.cell_dofs(c), x)
+                basis = _facet_basis(element, x, dofs, da, db, s)
                 for q, w in enumerate(wq):
                     for dof, value in basis[q]:
                         for comp in range(2):

@@ -43,12 +43,12 @@ from solver.physics.material import elasticity, strain
 
 
 class _Projection:
-    """A field kept as the solution of a fixed SPD system A x = b(L), b reassembled from the form L at each
+    """A field kept as the solution of a fixed SPD system A x = b(L), b reassembled from the form ``rhs`` at each
     :meth:`update`; A is solved by CG to 1e-14 with the given preconditioner (both are mass matrices)."""
 
-    def _init_solver(self, A: PETSc.Mat, L: fem.Form, target: fem.Function, pc: str) -> None:
-        self.L, self.target = L, target
-        self.b = fpetsc.create_vector(L)
+    def _init_solver(self, A: PETSc.Mat, rhs: fem.Form, target: fem.Function, pc: str) -> None:
+        self.rhs, self.target = rhs, target
+        self.b = fpetsc.create_vector(rhs)
         self.ksp = PETSc.KSP().create(target.function_space.mesh.comm)
         self.ksp.setOperators(A)
         self.ksp.setType("cg")
@@ -58,7 +58,7 @@ class _Projection:
     def update(self) -> None:
         with self.b.localForm() as local:
             local.set(0.0)
-        fpetsc.assemble_vector(self.b, self.L)
+        fpetsc.assemble_vector(self.b, self.rhs)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.ksp.solve(self.b, self.target.vector)
         self.target.x.scatter_forward()

@@ -164,24 +164,24 @@ class Operators:
         # loads: tractions (time-dependent constants on their facets); a zero term keeps the form valid without any
         self.tractions = [(p, fem.Constant(mesh, np.zeros(d, dtype=PETSc.ScalarType))) for p in tractions]
         zero = fem.Constant(mesh, np.zeros(d, dtype=PETSc.ScalarType))
-        L = sum((ufl.inner(f, self.w) * geo.ds(geo.tags[p.name]) for p, f in self.tractions),
+        load = sum((ufl.inner(f, self.w) * geo.ds(geo.tags[p.name]) for p, f in self.tractions),
                 ufl.inner(zero, self.w) * geo.ds)
         # the body force f0(t), a time-dependent constant over the body
         self.body_force = body_force if body_force is not None and body_force.f else None
         self.f0 = fem.Constant(mesh, np.zeros(d, dtype=PETSc.ScalarType))
         if self.body_force is not None:
-            L = L + ufl.inner(self.f0, self.w) * ufl.dx
-        self.L = fem.form(L)
+            load = load + ufl.inner(self.f0, self.w) * ufl.dx
+        self.load_form = fem.form(load)
         self.history = history
-        self.B = None  # the assembled memory coupling, where the history's source has no strain operator
+        self.memory_coupling = None  # the assembled memory coupling, where the history's source has no strain operator
         self._memory_force: MemoryForce | None = None
         if history is not None:
             source = history.H
             if isinstance(source, MemorySource):
                 self._memory_force = MemoryForce(history.rule, source)
             else:
-                self.B = fpetsc.assemble_matrix(fem.form(history.coupling(self.w)))
-                self.B.assemble()
+                self.memory_coupling = fpetsc.assemble_matrix(fem.form(history.coupling(self.w)))
+                self.memory_coupling.assemble()
 
         self.bulk = ufl.inner(elasticity(strain(self.du), material.E, material.nu, material.model),
                               strain(self.w)) * ufl.dx
@@ -191,7 +191,7 @@ class Operators:
         fpetsc.assemble_matrix(self.K, self.bulk_form, self.bcs)
         self.K.assemble()
 
-        self.b = fpetsc.create_vector(self.L)
+        self.b = fpetsc.create_vector(self.load_form)
         self.b_prev = self.b.duplicate()
         self._work = self.b.duplicate()  # B M_n after assemble_rhs
         self.loads = self.b.duplicate()  # (f_n, w) after assemble_rhs, Dirichlet rows included (for reactions)
@@ -218,14 +218,14 @@ class Operators:
         self.dirichlet.update(t)
         with self.b.localForm() as b:
             b.set(0.0)
-        fpetsc.assemble_vector(self.b, self.L)
+        fpetsc.assemble_vector(self.b, self.load_form)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.b.copy(self.loads)
         if self._memory_force is not None:
             self._memory_force(self.history.M, self._work)
             self.b.axpy(-1.0, self._work)
-        elif self.B is not None:
-            self.B.mult(self.history.M.vector, self._work)
+        elif self.memory_coupling is not None:
+            self.memory_coupling.mult(self.history.M.vector, self._work)
             self.b.axpy(-1.0, self._work)
         if self.dirichlet.inhomogeneous:
             with self._lift.localForm() as v:

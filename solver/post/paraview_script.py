@@ -143,65 +143,38 @@ def fit_camera(view, bounds: tuple[float, ...], size: tuple[int, int]) -> None:
     view.CameraParallelScale = scale
 
 
-def render(args: argparse.Namespace) -> int:
-    """Build the pipeline, print what the reader found, save the PNG; 0 on success, 2 on bad input."""
-    start = _time.perf_counter()
-    import paraview.simple as pvs
+def _chosen_time(times: list, asked: float | None) -> float:
+    """The written time to show: the last, or the one nearest to ``asked`` (with a note when not exact)."""
+    if asked is None:
+        return times[-1] if times else 0.0
+    t = min(times, key=lambda s: abs(s - asked)) if times else 0.0
+    if abs(t - asked) > 1e-9 * max(1.0, abs(asked)):
+        print(f"note: --time {fmt(asked)} is not a written time; showing the nearest, t = {fmt(t)}")
+    return t
 
-    given = args.results
-    if os.path.isdir(given):
-        given = os.path.join(given, "solution.xdmf")
-    if not os.path.isfile(given):
-        print(f"error: {args.results}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
-        return 2
-    path = os.path.abspath(given)
-    name, reader = open_results(path, args.reader)
-    times = timesteps(reader)
-    print(f"reader: {name}")
-    print(f"time values ({len(times)}): [{', '.join(fmt(t) for t in times)}]")
-    print(f"point arrays: {arrays(reader.PointData)}")
-    print(f"cell arrays: {arrays(reader.CellData)}")
 
-    if args.time is None:
-        t = times[-1] if times else 0.0
-    else:
-        t = min(times, key=lambda s: abs(s - args.time)) if times else 0.0
-        if abs(t - args.time) > 1e-9 * max(1.0, abs(args.time)):
-            print(f"note: --time {fmt(args.time)} is not a written time; showing the nearest, t = {fmt(t)}")
-
-    if args.field in reader.CellData.keys():
-        assoc = "CELLS"
-    elif args.field in reader.PointData.keys():
-        assoc = "POINTS"
-    else:
-        names = list(reader.PointData.keys()) + list(reader.CellData.keys())
-        print(f"error: --field {args.field}: not in the file (it has {', '.join(names)})", file=sys.stderr)
-        return 2
-    has_u = "displacement" in reader.PointData.keys()
-
-    reader.UpdatePipeline(t)
-    b = reader.GetDataInformation().GetBounds()
-    body = max(b[1] - b[0], b[3] - b[2], b[5] - b[4])
-    if args.warp is not None:
-        warp = args.warp
-    elif has_u:
-        umax = max_abs_component(reader, t)
-        warp = nice_warp(body, umax)
-        print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} at t = {fmt(t)} "
-              f"drawn as ~10% of the body size {body:.3g})")
-    else:
-        warp = 0.0
+def _warp(args: argparse.Namespace, reader, t: float, body: float, has_u: bool) -> float:
+    """The displacement's scale factor: the user's, or one that draws the largest displacement as ~10% of the body."""
     if not has_u:
         print("note: no 'displacement' array: drawing the undeformed mesh")
-        warp = 0.0
+        return 0.0
+    if args.warp is not None:
+        return args.warp
+    umax = max_abs_component(reader, t)
+    warp = nice_warp(body, umax)
+    print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} at t = {fmt(t)} "
+          f"drawn as ~10% of the body size {body:.3g})")
+    return warp
 
-    W, H = args.size
+
+def _view(pvs, size: tuple[int, int], t: float):
+    """A white render view at time t."""
     try:
         pvs.LoadPalette("WhiteBackground")
     except Exception:  # older ParaView: set the colours by hand below
         pass
     view = pvs.CreateView("RenderView")
-    view.ViewSize = [W, H]
+    view.ViewSize = list(size)
     view.ViewTime = t
     view.OrientationAxesVisibility = 0
     if hasattr(view, "UseColorPaletteForBackground"):
@@ -210,21 +183,28 @@ def render(args: argparse.Namespace) -> int:
     scene = pvs.GetAnimationScene()
     scene.UpdateAnimationUsingDataTimeSteps()
     scene.AnimationTime = t
+    return view
 
+
+def _pipeline(pvs, reader, t: float, has_u: bool, warp: float):
+    """(the body warped by the displacement, the undeformed boundary's outline)."""
     shown = reader
     if has_u:
         shown = pvs.WarpByVector(registrationName="WarpByVector", Input=reader)
         shown.Vectors = ["POINTS", "displacement"]
         shown.ScaleFactor = warp
     shown.UpdatePipeline(t)
-
     outline = pvs.FeatureEdges(registrationName="Undeformed", Input=pvs.ExtractSurface(Input=reader))
     outline.BoundaryEdges = 1
     outline.FeatureEdges = 0
     outline.NonManifoldEdges = 0
     outline.ManifoldEdges = 0
     outline.UpdatePipeline(t)
+    return shown, outline
 
+
+def _colour(pvs, args: argparse.Namespace, view, shown, assoc: str):
+    """Show the body coloured by the field: (its colour map, the field's number of components)."""
     disp = pvs.Show(shown, view)
     disp.SetRepresentationType("Surface With Edges" if args.edges else "Surface")
     if args.edges:
@@ -244,14 +224,12 @@ def render(args: argparse.Namespace) -> int:
     else:
         disp.RescaleTransferFunctionToDataRange(False, True)
     pvs.GetOpacityTransferFunction(args.field).RescaleTransferFunction(lut.RGBPoints[0], lut.RGBPoints[-4])
+    return disp, lut, ncomp
 
-    odisp = pvs.Show(outline, view)
-    pvs.ColorBy(odisp, None)
-    odisp.AmbientColor = odisp.DiffuseColor = [0.45, 0.45, 0.45]
-    odisp.LineWidth = 2.0
 
+def _scalar_bar(pvs, view, disp, lut, field: str, ncomp: int, H: int) -> None:
     bar = pvs.GetScalarBar(lut, view)
-    bar.Title = args.field
+    bar.Title = field
     bar.ComponentTitle = "(magnitude)" if ncomp > 1 else ""
     bar.Orientation = "Horizontal"
     bar.WindowLocation = "Any Location"
@@ -265,11 +243,10 @@ def render(args: argparse.Namespace) -> int:
     bar.Visibility = 1
     disp.SetScalarBarVisibility(view, True)
 
-    kind = "cell data" if assoc == "CELLS" else "point data"
-    title = f"{TITLES.get(args.field, args.field)}  ({args.field}, {kind})"
-    # two one-line texts: a multi-line, left-justified Text is laid out wrongly by ParaView 5.11 (lines shifted)
+
+def _captions(pvs, view, lines: tuple[str, str], H: int) -> None:
+    """Two one-line texts: a multi-line, left-justified Text is laid out wrongly by ParaView 5.11 (lines shifted)."""
     fs = max(12, H // 45)
-    lines = (title, f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed boundary)")
     for i, line in enumerate(lines):
         caption = pvs.Text(registrationName=f"Caption{i}")
         caption.Text = line
@@ -279,10 +256,51 @@ def render(args: argparse.Namespace) -> int:
         cdisp.FontSize = fs
         cdisp.Color = [0.0, 0.0, 0.0]
 
-    wb = shown.GetDataInformation().GetBounds()
-    bounds = tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max)))
-    fit_camera(view, bounds, (W, H))
 
+def render(args: argparse.Namespace) -> int:
+    """Build the pipeline, print what the reader found, save the PNG; 0 on success, 2 on bad input."""
+    start = _time.perf_counter()
+    import paraview.simple as pvs
+
+    given = args.results
+    if os.path.isdir(given):
+        given = os.path.join(given, "solution.xdmf")
+    if not os.path.isfile(given):
+        print(f"error: {args.results}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
+        return 2
+    name, reader = open_results(os.path.abspath(given), args.reader)
+    times = timesteps(reader)
+    print(f"reader: {name}")
+    print(f"time values ({len(times)}): [{', '.join(fmt(t) for t in times)}]")
+    print(f"point arrays: {arrays(reader.PointData)}")
+    print(f"cell arrays: {arrays(reader.CellData)}")
+    t = _chosen_time(times, args.time)
+    if args.field in reader.CellData.keys():
+        assoc = "CELLS"
+    elif args.field in reader.PointData.keys():
+        assoc = "POINTS"
+    else:
+        names = list(reader.PointData.keys()) + list(reader.CellData.keys())
+        print(f"error: --field {args.field}: not in the file (it has {', '.join(names)})", file=sys.stderr)
+        return 2
+    has_u = "displacement" in reader.PointData.keys()
+    reader.UpdatePipeline(t)
+    b = reader.GetDataInformation().GetBounds()
+    warp = _warp(args, reader, t, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]), has_u)
+    W, H = args.size
+    view = _view(pvs, (W, H), t)
+    shown, outline = _pipeline(pvs, reader, t, has_u, warp)
+    disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
+    odisp = pvs.Show(outline, view)
+    pvs.ColorBy(odisp, None)
+    odisp.AmbientColor = odisp.DiffuseColor = [0.45, 0.45, 0.45]
+    odisp.LineWidth = 2.0
+    _scalar_bar(pvs, view, disp, lut, args.field, ncomp, H)
+    kind = "cell data" if assoc == "CELLS" else "point data"
+    _captions(pvs, view, (f"{TITLES.get(args.field, args.field)}  ({args.field}, {kind})",
+                          f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed boundary)"), H)
+    wb = shown.GetDataInformation().GetBounds()
+    fit_camera(view, tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max))), (W, H))
     out = args.output or os.path.join(os.path.dirname(given), f"paraview_{args.field}.png")
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     pvs.Render(view)
