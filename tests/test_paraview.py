@@ -15,7 +15,7 @@ import solver.post.paraview as spv
 
 pytestmark = pytest.mark.serial  # starts its own processes (pvbatch has its own MPI)
 
-RENDER = "import sys; from solver.paraview import main; sys.exit(main(sys.argv[1:]))"
+RENDER = "import sys; from solver.post.paraview import main; sys.exit(main(sys.argv[1:]))"
 
 
 @pytest.fixture(scope="module")
