@@ -214,9 +214,10 @@ class OwnOptions:
         self._finalizer = weakref.finalize(owner, _delete, [*self.defaults, *self.user])
 
     def remove(self, defaults_only: bool = False) -> None:
-        """Remove the options from the database (only the defaults: the scene's stay until the owner goes)."""
+        """Remove the options from the database (``defaults_only``: those the scene did not set; its own stay
+        until the owner goes)."""
         if defaults_only:
-            _delete(self.defaults)
+            _delete([name for name in self.defaults if name not in self.user])
         else:
             self._finalizer()
 
