@@ -40,7 +40,7 @@ def test_without_cycle_detection_the_level_runs_to_max_it(comm, monkeypatch):
 
     def blind(self, *a, **k):
         original(self, *a, **k)
-        self._watch_cycles = False
+        self.cycles.enabled = False
 
     monkeypatch.setattr(newton.NewtonSolver, "__init__", blind)
     with pytest.raises(DisplacementSolveError) as err:

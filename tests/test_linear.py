@@ -190,7 +190,7 @@ def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypat
     monkeypatch.setattr(solver.solvers.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
     cfg = _small_3d("auto")
     model = build_model(cfg, comm)
-    assert model.linear == "iterative" and model.mech.solver._project and model.damage.iterative
+    assert model.linear == "iterative" and model.mech.solver.iterative and model.damage.iterative
     assert cfg.solver.linear == "auto"  # config.toml and the checkpoint's scene hash see the scene's own value
 
 
@@ -231,7 +231,10 @@ def test_multigrid_level_options_reach_the_preconditioner(comm):
     assert pc.getType() == "gamg"
     smoother = pc.getMGSmoother(pc.getMGLevels() - 1)
     assert smoother.getType() == "chebyshev" and smoother.getTolerances()[3] == 3  # default type, scene's max_it
-    assert not PETSc.Options().hasName("mech_mg_levels_ksp_max_it")  # and they are gone after the solve
+    # they stay for the solver's life under its own prefix, and nothing is left under the scene's mech_
+    own = model.mech.solver.options.prefix
+    assert PETSc.Options()[f"{own}mg_levels_ksp_max_it"] == "3"
+    assert not PETSc.Options().hasName("mech_mg_levels_ksp_max_it")
 
 
 def test_mumps_reads_its_workspace_option_in_both_solvers(comm):

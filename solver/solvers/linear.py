@@ -2,11 +2,14 @@
 
 Each solver has its own options prefix (``mech_`` for the displacement SNES
 and its KSP, ``damage_`` for the damage KSP) so that a scene's
-``[solver.petsc_options]`` can tune one without touching the other.
+``[solver.petsc_options]`` can tune one without touching the other. Inside, each
+solver object writes its options once under a prefix of its own (:class:`OwnOptions`).
 """
 
 from __future__ import annotations
 
+import itertools
+import weakref
 from contextlib import ExitStack
 
 import numpy as np
@@ -71,6 +74,29 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
 
 # Krylov tolerances relative to the Newton tolerance rtol (see iterative_options)
 KSP_RTOL_FACTOR = 0.1
+
+
+class KrylovTolerance:
+    """When and to what the Krylov solve of a Newton step is stopped, per level.
+
+    It need not go below what the Newton test asks of F: stop at ``0.1 rtol * scale`` (F after the step equals
+    the Krylov residual while the active set holds), or at ``0.1 rtol`` relative to the step's right-hand side,
+    whichever is reached first. Only for an iterative solver, and not if the scene sets ``{prefix}ksp_rtol``
+    or ``{prefix}ksp_atol`` itself."""
+
+    def __init__(self, rtol: float, iterative: bool, prefix: str, user: tuple[tuple[str, str], ...]) -> None:
+        self.rtol = rtol
+        own = {f"{prefix}ksp_rtol", f"{prefix}ksp_atol"}
+        self.applies = iterative and not any(k.lstrip("-") in own for k, _ in user)
+
+    def tolerances(self, scale: float) -> dict[str, float]:
+        """The KSP's rtol and atol for a level whose force scale is ``scale``."""
+        return {"rtol": KSP_RTOL_FACTOR * self.rtol, "atol": KSP_RTOL_FACTOR * self.rtol * scale}
+
+    def apply(self, ksp: PETSc.KSP, scale: float) -> None:
+        """Set the level's tolerances on ``ksp`` (where the policy applies)."""
+        if self.applies:
+            ksp.setTolerances(**self.tolerances(scale))
 
 
 # the displacement's preconditioner in 3-D Example 1 (scripts/amg_3d.py, benchmarks/results/amg_3d.md): Trilinos ML
@@ -161,6 +187,48 @@ def set_options(prefix: str, defaults: dict[str, str], user: tuple[tuple[str, st
             opts[key.lstrip("-")] = value
 
 
+_INSTANCES = itertools.count()
+
+
+class OwnOptions:
+    """A solver object's options, written once into PETSc's database under a prefix of its own.
+
+    The scene names options by the user-visible ``prefix`` (``mech_ksp_type``); they are written, with the
+    defaults below them, as ``{prefix}{n}_ksp_type`` for the n-th object, whose SNES/KSP is given
+    :attr:`prefix`. Two solvers in one process (tests, studies) then never read each other's options, and the
+    options can stay in the database for the object's life: a preconditioner reads those of its parts
+    (multigrid levels, a redundant or MUMPS factorization) at its set-up, during a solve. They are removed when
+    ``owner`` is garbage-collected (or by :meth:`remove`)."""
+
+    def __init__(self, owner: object, prefix: str, defaults: dict[str, str],
+                 user: tuple[tuple[str, str], ...]) -> None:
+        self.prefix = f"{prefix}{next(_INSTANCES)}_"
+        opts = PETSc.Options()
+        self.defaults = [f"{self.prefix}{key}" for key in defaults]
+        self.user = [f"{self.prefix}{key.lstrip('-').removeprefix(prefix)}" for key, _ in user
+                     if key.lstrip("-").startswith(prefix)]
+        for name, value in zip(self.defaults, defaults.values()):
+            opts[name] = value
+        for name, value in zip(self.user, (v for k, v in user if k.lstrip("-").startswith(prefix))):
+            opts[name] = value
+        self._finalizer = weakref.finalize(owner, _delete, [*self.defaults, *self.user])
+
+    def remove(self, defaults_only: bool = False) -> None:
+        """Remove the options from the database (``defaults_only``: those the scene did not set; its own stay
+        until the owner goes)."""
+        if defaults_only:
+            _delete([name for name in self.defaults if name not in self.user])
+        else:
+            self._finalizer()
+
+
+def _delete(names: list[str]) -> None:
+    opts = PETSc.Options()
+    for name in names:
+        if opts.hasName(name):
+            opts.delValue(name)
+
+
 def clear_options(prefix: str, keys) -> None:
     """Remove options written by :func:`set_options` (so runs in one process do not leak)."""
     opts = PETSc.Options()
@@ -232,16 +300,18 @@ def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, s
     Options PETSc rejects raise a ConfigError first (:func:`check_options`)."""
     defaults = linear_options(comm, kind, symmetric, rtol, elasticity=False)
     check_options(comm, prefix, defaults, user)
-    set_options(prefix, defaults, user)
     ksp = PETSc.KSP().create(comm)
-    ksp.setOptionsPrefix(prefix)
+    own = OwnOptions(ksp, prefix, defaults, user)
+    ksp.setOptionsPrefix(own.prefix)
     ksp.setOperators(A)
     ksp.setFromOptions()
     if kind == "iterative":
         ksp.setInitialGuessNonzero(True)  # x holds the last solution: the previous level's field
     if defaults.get("pc_factor_mat_solver_type") == "mumps":
         ksp.setUp()  # MUMPS reads its mat_mumps_* options when it factors: factor while they are set
-    clear_options(prefix, defaults)
+    # the defaults are gone before the first solve, as they always were (a redundant factorization's inner
+    # solver, set up then, takes PETSc's own defaults): kept so that the arithmetic does not change
+    own.remove(defaults_only=True)
     return ksp
 
 
