@@ -25,6 +25,7 @@ from solver.physics.memory import (
     make_history,
     trapezoid_term,
 )
+from solver.run.scheme import time_scheme
 from solver.solvers.damage import Damage, DamageLinearSolve, make_damage
 from solver.solvers.linear import choose_linear
 from solver.solvers.mechanics import Mechanics
@@ -66,8 +67,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
         solve = DamageLinearSolve(cfg.solver.petsc_options, linear, cfg.solver.rtol)
-        scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
-        damage = make_damage(scheme, Z, u, cfg.damage, k,
+        damage = make_damage(time_scheme(cfg).damage_scheme(cfg), Z, u, cfg.damage, k,
                              cfg.solver.damage_quadrature_degree, solve)
         zeta = damage.zeta
     else:
