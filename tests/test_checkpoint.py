@@ -54,3 +54,23 @@ def test_read_refuses_another_scene(comm, shared_tmp):
     other = build_model(from_dict({**SCENE, "material": {"E": 50.0}}), comm)
     with pytest.raises(ConfigError, match="scene differs"):
         checkpoint.read(shared_tmp, other)
+
+
+def test_round_trip_carries_the_cnab2_damage_state(comm, shared_tmp):
+    """The second-order damage's previous source and its 'have one' flag come back, and the next step is the
+    same as the uninterrupted one's, to the bit."""
+    cfg = from_dict({**SCENE, "time": {**SCENE["time"], "order": 2}})
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(3):
+        stepper.step(n)
+    checkpoint.write(shared_tmp, model, 2, 0.2, part=0)
+    fresh = build_model(cfg, comm)
+    assert not fresh.damage.have_prev
+    checkpoint.read(shared_tmp, fresh)
+    assert fresh.damage.scalars() == model.damage.scalars() == {"have_prev": 1.0}
+    assert np.array_equal(fresh.damage.state()["source_prev"], model.damage.state()["source_prev"])
+    assert fresh.damage.state()["source_prev"].any()
+    stepper.step(3)
+    Stepper(fresh).step(3)
+    assert np.array_equal(fresh.damage.zeta.x.array, model.damage.zeta.x.array)

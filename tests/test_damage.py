@@ -10,7 +10,13 @@ from mpi4py import MPI
 from solver.config import DamageConfig, load
 from solver.errors import DamageSolveError
 from solver.physics.damage import eta, psi, source
-from solver.solvers.damage import Damage
+from solver.run.model import build_model
+from solver.solvers.damage import (
+    CNAB2Damage,
+    ExplicitDamage,
+    SemiImplicitDamage,
+    make_damage,
+)
 
 
 def phi_hand(eps, z, c: DamageConfig) -> float:
@@ -41,7 +47,7 @@ def test_eta_and_psi(comm):
 def _damage(comm, cfg, k=0.1, n=6):
     m = unit_mesh(comm, n)
     u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
-    return Damage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2), u
+    return ExplicitDamage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2), u
 
 
 def _integral(d):
@@ -102,7 +108,7 @@ def test_semi_implicit_damage_is_linearised_implicit_euler(comm):
     u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
     cfg = DamageConfig(lambda1=0.5, zeta0=0.9, clip=False)
     k = 0.1
-    d = Damage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2, scheme="semi_implicit")
+    d = SemiImplicitDamage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, k, 2)
     z = 0.9
     for _ in range(4):
         d.step()
@@ -119,3 +125,44 @@ def test_semi_implicit_damage_refuses_an_unstable_step(comm):
     with pytest.raises(DamageSolveError) as err:
         solve(cfg, comm)
     assert err.value.reason == "SEMI_IMPLICIT_UNSTABLE" and err.value.step >= 1
+
+
+@pytest.mark.parametrize("scheme,cls", [("explicit", ExplicitDamage), ("semi_implicit", SemiImplicitDamage),
+                                        ("cnab2", CNAB2Damage)])
+def test_make_damage_picks_the_class_of_the_scheme(comm, scheme, cls):
+    m = unit_mesh(comm)
+    u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
+    d = make_damage(scheme, fem.FunctionSpace(m, ("CG", 1)), u, DamageConfig(), 0.1, 2)
+    assert type(d) is cls
+    # only the two-step scheme carries checkpoint state and a first-step corrector
+    assert bool(d.state()) == bool(d.scalars()) == (cls is CNAB2Damage)
+    assert hasattr(d, "correct_first_step") == (cls is CNAB2Damage)
+    with pytest.raises(ValueError, match="unknown damage scheme"):
+        make_damage("implicit", d.V, u, DamageConfig(), 0.1, 2)
+
+
+@pytest.mark.parametrize("sets,cls", [([], ExplicitDamage), (["solver.damage_scheme='semi_implicit'"], SemiImplicitDamage),
+                                      (["time.order=2"], CNAB2Damage)])
+def test_the_model_takes_the_damage_of_its_time_scheme(comm, sets, cls):
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=4", "mesh.ny=4", *sets])
+    assert type(build_model(cfg, comm).damage) is cls
+
+
+def test_cnab2_corrects_only_its_first_step(comm):
+    """Heun's corrector needs zeta_0, kept by the first step alone; it starts from zeta_0 again, so the corrected
+    zeta_1 of a zero source is the predicted one."""
+    cfg = DamageConfig(lambda1=0.0, lambda2=0.0, lambda3=0.0, kappa=0.1, clip=False)
+    m = unit_mesh(comm, 6)
+    u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 1)))
+    d = CNAB2Damage(fem.FunctionSpace(m, ("CG", 1)), u, cfg, 0.1, 2)
+    d.zeta.interpolate(lambda x: 0.5 + 0.4 * np.cos(np.pi * x[0]))
+    with pytest.raises(RuntimeError, match="first step"):
+        d.correct_first_step()
+    d.step()
+    predicted = d.zeta.x.array.copy()
+    d.correct_first_step()
+    assert np.allclose(d.zeta.x.array, predicted, rtol=0, atol=1e-14)
+    assert d.scalars() == {"have_prev": 1.0}
+    d.step()
+    with pytest.raises(RuntimeError, match="first step"):
+        d.correct_first_step()

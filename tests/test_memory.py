@@ -348,3 +348,14 @@ def test_history_finite_sees_what_was_written_through_state(comm):
     hist.M.x.array[0] = 0.0
     hist.commit(1)
     assert hist.finite()
+
+
+def test_every_configured_rule_is_a_sum_rule():
+    """Each memory.rule the config resolves to has its SumRule: H_0 at weight 1 (left) or 1/2 (trapezoids), the
+    past kept apart only by the extrapolated trapezoid."""
+    from solver.config.memory import RULES
+    from solver.physics.memory import SUM_RULES
+
+    assert set(SUM_RULES) == set(RULES) and SUM_RULES["auto"] is SUM_RULES["left"]
+    assert {name: (r.first_weight, r.extrapolated) for name, r in SUM_RULES.items() if name != "auto"} == {
+        "left": (1.0, False), "trapezoid": (0.5, False), "trapezoid_extrapolated": (0.5, True)}

@@ -20,6 +20,7 @@ level that keeps the Jacobian, and its factorization, independent of zeta_n.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import basix
 import dolfinx.fem.petsc  # noqa: F401  (fem.petsc)
@@ -400,18 +401,39 @@ class History:
         return ufl.inner(ufl.TrialFunction(self.M.function_space), ufl.sym(ufl.grad(w))) * self.rule.dx
 
 
+@dataclass(frozen=True)
+class SumRule:
+    """The quadrature in time of a Prony history M_n = k sum_m g((n-m) k) H_m (docs/model.md §3.4, §3.7).
+
+    ``first_weight``: the weight of H_0 in the recursion (1: left rectangles; 1/2: trapezoid, whose
+    current level's term (k/2) g(0) H_n is added apart). ``extrapolated``: that term is H at an
+    extrapolated u* = 2 u_{n-1} - u_{n-2}, set before the displacement solve, so the recursion's
+    past sum P is kept apart from M (M_n = P_n + (k/2) g(0) H(u*)); otherwise it is implicit in u_n
+    (:func:`trapezoid_term`) or absent (left), and the recursion writes M itself.
+    """
+
+    name: str
+    first_weight: float
+    extrapolated: bool = False
+
+
+LEFT = SumRule("left", 1.0)
+TRAPEZOID = SumRule("trapezoid", 0.5)
+TRAPEZOID_EXTRAPOLATED = SumRule("trapezoid_extrapolated", 0.5, extrapolated=True)
+SUM_RULES = {r.name: r for r in (LEFT, TRAPEZOID, TRAPEZOID_EXTRAPOLATED)}
+SUM_RULES["auto"] = LEFT  # a MemoryConfig made directly, not resolved by the loader: order 1's rule
+
+
 class PronyHistory(History):
     """Prony series (constant kernel: one term with tau = inf), updated recursively."""
 
-    def __init__(self, rule: QuadratureRule, source, weights, times, k: float, trapezoid: bool = False,
-                 extrapolated: bool = False) -> None:
+    def __init__(self, rule: QuadratureRule, source, weights, times, k: float,
+                 sum_rule: SumRule = LEFT) -> None:
         self.rule = rule
         self.M = fem.Function(source.Q, name="memory")
         self.H = source
-        # trapezoid: M_n = P_n + (k/2) g(0) H_n, where P follows the same recursion with H_0 at weight k/2;
-        # implicit in u_n (trapezoid) or with H_n evaluated at an extrapolated u (extrapolated: P kept apart)
-        self.trapezoid = trapezoid or extrapolated
-        self.extrapolated = extrapolated
+        self.sum_rule = sum_rule
+        extrapolated = self.extrapolated = sum_rule.extrapolated
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
         if extrapolated:  # H(u*) from the strains of u_{n-1} and u_{n-2}, kept by the source
             if not hasattr(source, "extrapolated"):
@@ -431,7 +453,7 @@ class PronyHistory(History):
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
 
     def commit(self, n: int) -> None:
-        half = 0.5 if self.trapezoid and n == 0 else 1.0
+        half = self.sum_rule.first_weight if n == 0 else 1.0
         if self.current_weight is not None:
             self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
@@ -572,8 +594,7 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):
-        return PronyHistory(rule, source, cfg.weights, cfg.times, k, trapezoid=cfg.rule == "trapezoid",
-                            extrapolated=cfg.rule == "trapezoid_extrapolated")
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k, SUM_RULES[cfg.rule])
     return TabulatedHistory(rule, source, cfg.table, k, steps)
 
 

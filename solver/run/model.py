@@ -25,7 +25,8 @@ from solver.physics.memory import (
     make_history,
     trapezoid_term,
 )
-from solver.solvers.damage import Damage
+from solver.run.scheme import time_scheme
+from solver.solvers.damage import Damage, DamageLinearSolve, make_damage
 from solver.solvers.linear import choose_linear
 from solver.solvers.mechanics import Mechanics
 
@@ -65,9 +66,9 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     damage = None
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
-        scheme = "cnab2" if cfg.time.order == 2 else cfg.solver.damage_scheme
-        damage = Damage(Z, u, cfg.damage, k, cfg.solver.damage_quadrature_degree, cfg.solver.petsc_options,
-                        linear, scheme, cfg.solver.rtol)
+        solve = DamageLinearSolve(cfg.solver.petsc_options, linear, cfg.solver.rtol)
+        damage = make_damage(time_scheme(cfg).damage_scheme(cfg), Z, u, cfg.damage, k,
+                             cfg.solver.damage_quadrature_degree, solve)
         zeta = damage.zeta
     else:
         zeta = fem.Constant(mesh, PETSc.ScalarType(cfg.damage.zeta0))

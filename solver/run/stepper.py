@@ -1,6 +1,7 @@
 """The time loop of Problem VP^hk (docs/model.md §3.6).
 
-:meth:`Stepper.step` advances level n-1 -> n, with only data of level n-1 on the right-hand sides:
+:meth:`Stepper.step` advances level n-1 -> n, with only data of level n-1 on the right-hand sides
+(what each step does per order: :mod:`solver.run.scheme`):
   1. memory: M_n from (u_{n-1}, zeta_{n-1}) -- level n-1 converged, so it is committed now;
   2. damage: zeta_{n-1} -> zeta_n (uses u_{n-1}, zeta_{n-1});
   3. displacement: u_n with M_n;
@@ -21,6 +22,7 @@ from solver.errors import NonFiniteError, SolveFailure
 from solver.physics.diagnostics import DamageDiagnostics
 from solver.physics.memory import all_finite
 from solver.run.model import Model
+from solver.run.scheme import time_scheme
 
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
 
@@ -32,50 +34,34 @@ class Stepper:
         self.model = model
         self.k = model.cfg.time.k
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
-        # the second-order scheme starts with one predictor-corrector step (Heun): AB2 and the extrapolation
-        # need two past levels
-        self.heun_start = model.cfg.time.order == 2 and (model.damage is not None or model.u_prev is not None)
+        self.scheme = time_scheme(model.cfg)(model)
 
     def step(self, n: int) -> dict:
         """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""
-        model, t = self.model, n * self.k
+        scheme, t = self.scheme, n * self.k
         t0 = time.perf_counter()
-        clipped, raw, dkrylov = 0, None, 0
+        dinfo = None
         try:
-            if n > 0 and model.history is not None:
-                model.history.commit(n - 1)
+            if n > 0:
+                scheme.memory(n)  # 1. M_n from level n-1
             t1 = time.perf_counter()
-            if n > 0 and model.damage is not None:
-                dinfo = model.damage.step()
-                clipped, raw, dkrylov = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max), dinfo.krylov_iterations
-            if n > 0 and model.u_prev is not None:
-                self._extrapolated_memory(n)
+            if n > 0:
+                dinfo = scheme.damage(n)  # 2. zeta_n
             t2 = time.perf_counter()
-            info = model.mech.solve(t)
-            if n == 1 and self.heun_start:  # correct zeta_1 and M_1 with the predicted u_1, then solve again
-                if model.damage is not None:
-                    dinfo = model.damage.correct_first_step()
-                    clipped, raw = dinfo.clipped, (dinfo.raw_min, dinfo.raw_max)
-                    dkrylov += dinfo.krylov_iterations
-                if model.u_prev is not None:
-                    model.history.extrapolate(None)  # H(u_1, zeta_1), both predicted
-                again = model.mech.solve(t)
-                again.iterations += info.iterations
-                again.linear_solves += info.linear_solves
-                again.factorizations += info.factorizations
-                again.krylov_iterations += info.krylov_iterations
-                info = again
+            info, dinfo = scheme.displacement(n, t, dinfo)  # 3. u_n
             self._check_finite()
         except SolveFailure as exc:
             raise exc.at(n, t) from None
         t3 = time.perf_counter()
         zmin, zmax = self.damage_diagnostics.zeta_range()
-        raw = raw or (zmin, zmax)  # the range before clipping (level 0: the initial field)
+        # the range before clipping (level 0 or no damage: the field's)
+        raw = (dinfo.raw_min, dinfo.raw_max) if dinfo is not None else (zmin, zmax)
+        clipped, dkrylov = (dinfo.clipped, dinfo.krylov_iterations) if dinfo is not None else (0, 0)
         row = {
             "step": n, "t": t, "newton_iterations": info.iterations, "linear_solves": info.linear_solves,
             "factorizations": info.factorizations, "residual": info.residual,
             "krylov_iterations": info.krylov_iterations, "damage_krylov_iterations": dkrylov,
-            **model.mech.diagnostics.row(),
+            **self.model.mech.diagnostics.row(),
             "zeta_min": zmin, "zeta_max": zmax, "zeta_raw_min": raw[0], "zeta_raw_max": raw[1], "zeta_clipped": clipped,
             "zeta_norm": self.damage_diagnostics.zeta_norm(),
         }
@@ -83,14 +69,6 @@ class Stepper:
         row.update({"time_memory": t1 - t0, "time_damage": t2 - t1, "time_displacement": t3 - t2,
                     "time_diagnostics": t4 - t3})
         return row
-
-    def _extrapolated_memory(self, n: int) -> None:
-        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); then u_prev = u_{n-1}.
-
-        H(u*) comes from the strains of u_{n-1} (just committed) and u_{n-2} by linearity: no third product."""
-        model = self.model
-        model.history.extrapolate(model.u_prev.x.array if n >= 2 else None)
-        model.u_prev.x.array[:] = model.u.x.array
 
     def _check_finite(self) -> None:
         model = self.model
