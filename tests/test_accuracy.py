@@ -92,8 +92,8 @@ def test_the_achieved_error_is_below_the_tolerance():
     """Example 1 over 0.2 s at TOL 3e-3, against a P2 reference planned at 3e-4 with a 4x smaller step."""
     from studies.tolerance import Reference, tolerance_run
 
-    ref = Reference.planned(SCENE, SHORT, 3e-4, 4, log=lambda *a: None)
-    rec = tolerance_run(ref, SCENE, SHORT, 3e-3, log=lambda *a: None)
+    ref = Reference.planned(_short(), 3e-4, 4, log=lambda *a: None)
+    rec = tolerance_run(ref, _short(), 3e-3, log=lambda *a: None)
     assert 0.2 * 3e-3 <= rec["error"] <= 3e-3, rec
 
 
