@@ -151,10 +151,11 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     return 0
 
 
-def _tolerance_overrides(args) -> list[str]:
-    """``--set`` overrides with ``--tolerance`` as accuracy.tolerance (checked like the scene key)."""
+def _scene(args):
+    """The scene with its ``--set`` overrides, and ``--tolerance`` as accuracy.tolerance (checked like the scene
+    key, before the scene is read)."""
     if args.tolerance is None:
-        return list(args.overrides)
+        return load(args.config, args.overrides)
     from solver.config.accuracy import tolerance
     from solver.config.fields import Ctx
 
@@ -162,14 +163,14 @@ def _tolerance_overrides(args) -> list[str]:
         value = float(args.tolerance)
     except ValueError:
         raise UsageError(f"--tolerance {args.tolerance}: must be a number strictly between 0 and 1") from None
-    return [*args.overrides, f"accuracy.tolerance={tolerance(Ctx('--tolerance'), 'tolerance', value)!r}"]
+    value = tolerance(Ctx("--tolerance"), "tolerance", value)
+    return load(args.config, args.overrides).replace({"accuracy": {"tolerance": value}}, label="--tolerance")
 
 
 def cmd_run(args, comm: MPI.Comm) -> int:
     import time
 
-    overrides = _tolerance_overrides(args)
-    cfg = load(args.config, overrides)
+    cfg = _scene(args)
     outdir = Path(args.output or cfg.output.directory)
     # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
     from solver.io.results import run
@@ -188,8 +189,8 @@ def cmd_run(args, comm: MPI.Comm) -> int:
         _prepare_output(comm, outdir, args.overwrite, args.restart)
         log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
         formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
-        plan = make_plan(Path(args.config), overrides, comm, log=log.info)
-        cfg = load(args.config, [*overrides, *plan.overrides])
+        plan = make_plan(cfg, comm, log=log.info)
+        cfg = plan.config
         model = build_model(cfg, comm, plan.geo)
         sensors = (ErrorSensor(model, plan),)
         _write_plan(comm, outdir, plan, model)

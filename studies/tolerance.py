@@ -33,33 +33,45 @@ from mpi4py import MPI
 from studies import REPO as ROOT  # noqa: E402
 
 CONFIGS = ROOT / "configs"
-SCENES = {
-    "example1": (CONFIGS / "example1.toml", []),
-    "example2": (CONFIGS / "example2.toml", []),
-    "example3": (CONFIGS / "example3.toml", []),
-    "hard": (CONFIGS / "hard.toml", []),
-    "example1-gap0.02": (CONFIGS / "example1.toml", ["boundary.bottom.gap=0.02"]),
-    "example1-mu1e-3": (CONFIGS / "example1.toml", ["boundary.bottom.mu=1e-3"]),
+SCENES = {  # name -> (scene file, its changes)
+    "example1": (CONFIGS / "example1.toml", {}),
+    "example2": (CONFIGS / "example2.toml", {}),
+    "example3": (CONFIGS / "example3.toml", {}),
+    "hard": (CONFIGS / "hard.toml", {}),
+    "example1-gap0.02": (CONFIGS / "example1.toml", {"boundary": {"bottom": {"gap": 0.02}}}),
+    "example1-mu1e-3": (CONFIGS / "example1.toml", {"boundary": {"bottom": {"mu": 1e-3}}}),
 }
 TOLS = (1e-2, 3e-3, 1e-3)
-QUIET = ["output.xdmf=false"]
+QUIET = {"output": {"xdmf": False}}
 MAX_DOFS = 300_000  # per run of the study (the tolerance runs' accuracy.max_dofs, and the uniform meshes)
+
+
+def scene(name: str):
+    """The study's scene ``name`` (a Config, without XDMF output)."""
+    from solver.config import load, merge
+
+    path, changes = SCENES[name]
+    return load(path).replace(merge(changes, QUIET), label=f"study tolerance {name}")
+
+
+def quiet(cfg):
+    """``cfg`` without XDMF output."""
+    return cfg.replace(QUIET, label="study tolerance")
 
 
 class Reference:
     """A fine run kept at every level (u, zeta), on its own mesh: a tolerance run (:meth:`planned`) or a uniform
     P2, second-order run (:meth:`uniform`, for a scene whose planned reference is out of reach)."""
 
-    def __init__(self, path: Path, overrides: list[str], chosen: list[str], k: float, geo, what: str,
+    def __init__(self, scene, chosen: dict, k: float, geo, what: str,
                  estimate: float | None = None, log=print) -> None:
         from solver.errors import SolveFailure
         from solver.io.results import run
 
         t0 = time.perf_counter()
-        self.path, self.overrides, self.geo, self.estimate = path, overrides, geo, estimate
+        self.scene, self.geo, self.estimate = quiet(scene).replace(chosen, label="reference"), geo, estimate
         for halving in range(3):  # a step Newton cannot take on the fine mesh is halved
             self.k = k / 2**halving
-            self.chosen = [*chosen, f"time.k={self.k!r}"]
             self.model = model = self.build()
             self.u, self.zeta = [], []
 
@@ -82,32 +94,29 @@ class Reference:
 
     def build(self):
         """A new model of the reference's discretization (not yet run)."""
-        from solver.config import load
         from solver.run.model import build_model
 
-        return build_model(load(self.path, [*self.overrides, *QUIET, *self.chosen]), MPI.COMM_SELF, self.geo)
+        cfg = self.scene.replace({"time": {"k": self.k}}, label="reference")
+        return build_model(cfg, MPI.COMM_SELF, self.geo)
 
     @classmethod
-    def planned(cls, path: Path, overrides: list[str], tol: float, refine_k: int, log=print) -> Reference:
+    def planned(cls, scene, tol: float, refine_k: int, log=print) -> Reference:
         """A P2 tolerance run at ``tol`` with a ``refine_k`` times smaller step than the plan's."""
         from solver.run.accuracy import plan
 
         t0 = time.perf_counter()
-        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", "accuracy.degrees=[2]",
-                        f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF, log=lambda *a: None)
-        ref = cls(path, overrides, p.overrides, p.k / refine_k, p.geo, f"TOL {tol:g}, P2 order {p.order}",
+        accuracy = {"accuracy": {"tolerance": tol, "degrees": [2], "max_dofs": MAX_DOFS}}
+        p = plan(quiet(scene).replace(accuracy, label="reference"), MPI.COMM_SELF, log=lambda *a: None)
+        ref = cls(scene, p.changes, p.k / refine_k, p.geo, f"TOL {tol:g}, P2 order {p.order}",
                   sum(p.estimate.values()), log=log)
         ref.seconds = time.perf_counter() - t0  # its planning too
         return ref
 
     @classmethod
-    def uniform(cls, path: Path, overrides: list[str], n: int, steps: int, log=print) -> Reference:
+    def uniform(cls, scene, n: int, steps: int, log=print) -> Reference:
         """P2, second order, on the scene's rectangle with n cells across its shorter side and k = T / steps."""
-        from solver.config import load
-
-        cfg = load(path, [*overrides, *QUIET])
-        chosen = [*_rectangle(cfg, n), "discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2"]
-        return cls(path, overrides, chosen, cfg.time.T / steps, None, f"uniform P2 order 2, n = {n}", log=log)
+        chosen = {**_rectangle(scene, n), "discretization": {"u_degree": 2, "zeta_degree": 2}, "time": {"order": 2}}
+        return cls(scene, chosen, scene.time.T / steps, None, f"uniform P2 order 2, n = {n}", log=log)
 
     def level(self, t: float) -> int | None:
         m = t / self.k
@@ -143,21 +152,19 @@ class Reference:
                 "levels": len(errs), "failure": failure, "dofs": int(model.u.x.array.size)}
 
 
-def _rectangle(cfg, n: int) -> list[str]:
+def _rectangle(cfg, n: int) -> dict:
     """mesh.nx, mesh.ny of n cells across the rectangle's shorter side (cells about square)."""
     (x0, y0), (x1, y1) = cfg.mesh.corners
     short = min(x1 - x0, y1 - y0)
-    return [f"mesh.nx={round(n * (x1 - x0) / short)}", f"mesh.ny={round(n * (y1 - y0) / short)}"]
+    return {"mesh": {"nx": round(n * (x1 - x0) / short), "ny": round(n * (y1 - y0) / short)}}
 
 
-def _uniform_meshes(path: Path, overrides: list[str], levels: int):
-    """(label, overrides, geo or None) of uniform meshes: n = 4, 8, ... on a rectangle (cells about square),
+def _uniform_meshes(cfg, levels: int):
+    """(label, mesh changes, geo or None) of uniform meshes: n = 4, 8, ... on a rectangle (cells about square),
     the scene's mesh refined uniformly 0, 1, ... times otherwise."""
-    from solver.config import load
     from solver.mesh.adapt import refine_uniformly
     from solver.mesh.geometry import build
 
-    cfg = load(path, [*overrides, *QUIET])
     if cfg.mesh.kind == "rectangle":
         for i in range(levels):
             n = 4 * 2**i
@@ -165,26 +172,26 @@ def _uniform_meshes(path: Path, overrides: list[str], levels: int):
         return
     geo = build(MPI.COMM_SELF, cfg.mesh, cfg.boundaries, cfg.dim)
     for r in range(min(levels, 3)):  # a gmsh mesh is already fine: 16x its cells at r = 2
-        yield f"r={r}", [], geo
+        yield f"r={r}", {}, geo
         geo = refine_uniformly(geo)
 
 
-def uniform_sweep(ref: Reference, path: Path, overrides: list[str], tols, levels: int, steps: tuple[int, ...],
+def uniform_sweep(ref: Reference, scene, tols, levels: int, steps: tuple[int, ...],
                   log=print) -> list[dict]:
     """Every (degree, order, mesh, step) until the mesh no longer helps or the smallest tolerance is met."""
-    from solver.config import load
     from solver.run.model import build_model
 
-    T = load(path, [*overrides, *QUIET]).time.T
+    scene = quiet(scene)
+    T = scene.time.T
     rows = []
     for degree in (1, 2):
         for order in (1, 2):
             for n_steps in steps:
                 k = T / n_steps
                 last = np.inf
-                for label, mesh_over, geo in _uniform_meshes(path, overrides, levels):
-                    cfg = load(path, [*overrides, *QUIET, *mesh_over, f"discretization.u_degree={degree}",
-                                      f"time.order={order}", f"time.k={k!r}"])
+                for label, mesh, geo in _uniform_meshes(scene, levels):
+                    cfg = scene.replace({**mesh, "discretization": {"u_degree": degree},
+                                         "time": {"order": order, "k": k}}, label="uniform sweep")
                     model = build_model(cfg, MPI.COMM_SELF, geo)
                     if model.u.x.array.size > MAX_DOFS:
                         break
@@ -206,22 +213,21 @@ def cheapest(rows: list[dict], tol: float) -> dict | None:
     return min(ok, key=lambda r: r["cost"]) if ok else None
 
 
-def tolerance_run(ref: Reference, path: Path, overrides: list[str], tol: float, log=print) -> dict:
+def tolerance_run(ref: Reference, scene, tol: float, log=print) -> dict:
     """Plan and run at ``tol``; the error against the reference, the cost (planning + loop) and the estimate."""
-    from solver.config import load
     from solver.errors import SolveFailure, ToleranceError
     from solver.run.accuracy import ErrorSensor, plan
     from solver.run.model import build_model
 
     t0 = time.perf_counter()
     try:
-        p = plan(path, [*overrides, f"accuracy.tolerance={tol!r}", f"accuracy.max_dofs={MAX_DOFS}"], MPI.COMM_SELF,
-                 log=lambda *a: None)
+        at_tol = scene.replace({"accuracy": {"tolerance": tol, "max_dofs": MAX_DOFS}}, label=f"TOL {tol:g}")
+        p = plan(at_tol, MPI.COMM_SELF, log=lambda *a: None)
     except (ToleranceError, SolveFailure) as exc:
         log(f"  TOL {tol:g}: out of reach ({exc})")
         return {"tolerance": tol, "out_of_reach": str(exc), "planning_seconds": time.perf_counter() - t0}
     planning = time.perf_counter() - t0
-    cfg = load(path, [*overrides, *QUIET, f"accuracy.tolerance={tol!r}", *p.overrides])
+    cfg = quiet(scene).replace({"accuracy": {"tolerance": tol}, **p.changes}, label=f"TOL {tol:g}")
     model = build_model(cfg, MPI.COMM_SELF, p.geo)
     sensor = ErrorSensor(model, p)
     sensor_rows = []
@@ -264,7 +270,6 @@ def scene_ref_tol(item: str) -> tuple[str, float]:
 def scene_ref_uniform(item: str) -> tuple[str, tuple[int, int]]:
     """One ``--scene-ref-uniform NAME=N:STEPS`` item as (scene, (n, steps)); ValueError for an unknown scene, a scene
     not on a rectangle, or n, steps that are not even integers >= 2 (the second reference is at n / 2, steps / 2)."""
-    from solver.config import load
 
     name, value = _scene_item(item, "NAME=N:STEPS")
     n_text, colon, steps_text = value.partition(":")
@@ -274,8 +279,7 @@ def scene_ref_uniform(item: str) -> tuple[str, tuple[int, int]]:
         n = steps = 0
     if not colon or n < 2 or steps < 2 or n % 2 or steps % 2:
         raise ValueError(f"{item}: N and STEPS must be even integers >= 2 (the second reference takes half of each)")
-    path, overrides = SCENES[name]
-    if load(path, [*overrides, *QUIET]).mesh.kind != "rectangle":
+    if scene(name).mesh.kind != "rectangle":
         raise ValueError(f"{item}: a uniform reference needs a scene on a built-in rectangle, not a gmsh mesh")
     return name, (n, steps)
 
@@ -317,7 +321,7 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
         if name in result["scenes"]:
             log(f"{name}: kept from {old}")
             continue
-        path, overrides = SCENES[name]
+        cfg = scene(name)
         spec = _spec(name, ref_tol, per_scene, uniform)
         own = name in per_scene or name in uniform
         log(f"{name}:" + (f" its own reference, {_label(spec)}" if own else ""))
@@ -326,11 +330,11 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
         try:
             if "uniform" in spec:
                 n, n_steps = spec["uniform"]
-                ref = Reference.uniform(path, overrides, n, n_steps, log=log)
-                second = Reference.uniform(path, overrides, n // 2, n_steps // 2, log=log)
+                ref = Reference.uniform(cfg, n, n_steps, log=log)
+                second = Reference.uniform(cfg, n // 2, n_steps // 2, log=log)
             else:
-                ref = Reference.planned(path, overrides, spec["ref_tol"], 4, log=log)
-                second = Reference.planned(path, overrides, 3 * spec["ref_tol"], 2, log=log)
+                ref = Reference.planned(cfg, spec["ref_tol"], 4, log=log)
+                second = Reference.planned(cfg, 3 * spec["ref_tol"], 2, log=log)
         except (ToleranceError, SolveFailure) as exc:
             log(f"  no reference: {exc}")
             result["scenes"][name] = {"reference": {"failure": str(exc), **spec}, "runs": [], "uniform": []}
@@ -339,10 +343,10 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
 
         ref_check = ref.measure(second.build())
         log(f"  second reference against it: {ref_check['error']:.2e}")
-        uniform_rows = uniform_sweep(ref, path, overrides, tols, levels, steps, log=log)
+        uniform_rows = uniform_sweep(ref, cfg, tols, levels, steps, log=log)
         runs = []
         for tol in tols:
-            rec = tolerance_run(ref, path, overrides, tol, log=log)
+            rec = tolerance_run(ref, cfg, tol, log=log)
             if "out_of_reach" in rec:
                 runs.append(rec)
                 continue

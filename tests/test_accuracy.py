@@ -16,11 +16,15 @@ from solver.errors import ConfigError
 from solver.run.accuracy import ZETA_EXPONENT_MAX, ZETA_EXPONENT_MIN, _theta, contradicting, observed_exponent, plan
 
 SCENE = ROOT / "configs/example1.toml"
-SHORT = ["time.T=0.2"]  # the paper's Example 1 over 0.2 s: quick, with memory and damage
+SHORT = {"time": {"T": 0.2}}  # the paper's Example 1 over 0.2 s: quick, with memory and damage
 
 
-def _plan(comm, tol, extra=()):
-    return plan(SCENE, [*SHORT, f"accuracy.tolerance={tol!r}", *extra], comm, log=lambda *a: None)
+def _short():
+    return load(SCENE).replace(SHORT)
+
+
+def _plan(comm, tol, accuracy=None):
+    return plan(_short().replace({"accuracy": {"tolerance": tol, **(accuracy or {})}}), comm, log=lambda *a: None)
 
 
 @pytest.mark.parametrize("s", [0.55, 0.7, 0.9])
@@ -88,8 +92,8 @@ def test_the_achieved_error_is_below_the_tolerance():
     """Example 1 over 0.2 s at TOL 3e-3, against a P2 reference planned at 3e-4 with a 4x smaller step."""
     from studies.tolerance import Reference, tolerance_run
 
-    ref = Reference.planned(SCENE, SHORT, 3e-4, 4, log=lambda *a: None)
-    rec = tolerance_run(ref, SCENE, SHORT, 3e-3, log=lambda *a: None)
+    ref = Reference.planned(_short(), 3e-4, 4, log=lambda *a: None)
+    rec = tolerance_run(ref, _short(), 3e-3, log=lambda *a: None)
     assert 0.2 * 3e-3 <= rec["error"] <= 3e-3, rec
 
 
@@ -159,7 +163,7 @@ def test_a_tolerance_out_of_reach_names_the_users_tolerance_and_the_parts_target
     from solver.errors import ToleranceError
 
     with pytest.raises(ToleranceError) as info:
-        _plan(MPI.COMM_WORLD, 1e-3, ["accuracy.max_dofs=300"])
+        _plan(MPI.COMM_WORLD, 1e-3, {"max_dofs": 300})
     err = info.value
     assert err.tolerance == 1e-3 and err.limit == "accuracy.max_dofs"
     assert err.target is not None and 0.0 < err.target < 1e-3 and err.estimate > err.target and err.dofs > 300
@@ -179,8 +183,8 @@ def test_the_zeta_estimate_bounds_the_difference_to_a_much_finer_mesh(monkeypatc
     fine = p.geo
     for _ in range(2):
         fine = refine_uniformly(fine)
-    over = [*SHORT, *p.overrides, "time.k=0.02"]
-    coarse_run, fine_run = accuracy._zeta_runs(SCENE, over, MPI.COMM_WORLD, [p.geo, fine], {})
+    at = p.config.replace({"time": {"k": 0.02}})
+    coarse_run, fine_run = accuracy._zeta_runs(at, MPI.COMM_WORLD, [p.geo, fine], {})
     measured = accuracy._zeta_difference(coarse_run, fine_run, MPI.COMM_WORLD)
     assert seen and measured > 0.0
     assert seen[-1][0] >= measured, (seen[-1][0], measured)
@@ -199,25 +203,25 @@ def test_where_zetas_part_leaves_room_u_is_adapted_on_instead_of_refining_unifor
     original = accuracy._zeta_space
 
     def spy(*a, **k):
-        meshes.append(a[3])  # the mesh zeta's part is estimated on
+        meshes.append(a[2])  # the mesh zeta's part is estimated on
         seen.append(original(*a, **k))
         return seen[-1]
 
     monkeypatch.setattr(accuracy, "_zeta_space", spy)
-    over = ["boundary.bottom.mu=1e-3"]
-    p = plan(SCENE, [*over, "accuracy.tolerance=3e-3"], MPI.COMM_WORLD, log=lines.append)
+    p = plan(load(SCENE).replace({"boundary": {"bottom": {"mu": 1e-3}}, "accuracy": {"tolerance": 3e-3}}),
+             MPI.COMM_WORLD, log=lines.append)
     assert any(line.startswith("  a Dörfler step for u") and line.endswith("taken") for line in lines), lines
     assert not any(r.get("uniform") for r in p.adaptation) and p.geo.num_cells() < 1296
     assert len(seen) == 1
     coarse = meshes[0]
-    k0 = ["time.k=0.1"]
-    runs = accuracy._zeta_runs(SCENE, [*over, *p.overrides, *k0], MPI.COMM_WORLD, [coarse, p.geo], {})
+    at_k0 = p.config.replace({"time": {"k": 0.1}})
+    runs = accuracy._zeta_runs(at_k0, MPI.COMM_WORLD, [coarse, p.geo], {})
     step = accuracy._zeta_difference(*runs, MPI.COMM_WORLD)
     assert p.estimate["space_zeta"] == pytest.approx(seen[0][0] + step, rel=1e-12)
     fine = p.geo
     for _ in range(2):
         fine = refine_uniformly(fine)
-    runs = accuracy._zeta_runs(SCENE, [*over, *p.overrides, *k0], MPI.COMM_WORLD, [p.geo, fine], {})
+    runs = accuracy._zeta_runs(at_k0, MPI.COMM_WORLD, [p.geo, fine], {})
     measured = accuracy._zeta_difference(*runs, MPI.COMM_WORLD)
     assert 0.0 < measured <= p.estimate["space_zeta"], (measured, p.estimate)
     assert sum(p.estimate.values()) <= 3e-3

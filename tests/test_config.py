@@ -313,3 +313,57 @@ def test_a_gmsh_files_dimension_is_read_once_per_version_of_the_file(tmp_path):
     os.utime(msh, ns=(0, 1))  # a new version of the file (another mtime): read again
     misses = _gmsh_dim.cache_info().misses
     assert gmsh_dim(str(msh)) == 2 and _gmsh_dim.cache_info().misses == misses + 1
+
+
+EX1 = ROOT / "configs/example1.toml"
+
+
+@pytest.mark.parametrize("changes, sets", [
+    ({"time": {"k": 0.005}, "mesh": {"nx": 32}}, ["time.k=0.005", "mesh.nx=32"]),
+    ({"time": {"order": 2}}, ["time.order=2"]),  # memory.rule 'auto' re-derived, as in the file
+    ({"discretization": {"u_degree": 2}}, ["discretization.u_degree=2"]),  # quadrature degrees re-derived
+    ({"boundary": {"bottom": {"mu": 1e-3}}, "output": {"xdmf": False}}, ["boundary.bottom.mu=1e-3", "output.xdmf=false"]),
+])
+def test_replace_equals_the_file_with_the_same_sets(changes, sets):
+    cfg = load(EX1)
+    new = cfg.replace(changes)
+    assert new == load(EX1, sets) and new.source == str(EX1)
+    assert cfg == load(EX1)  # the original is unchanged
+    assert new.replace({"time": {"T": 2.0}}) == load(EX1, [*sets, "time.T=2.0"])  # replacements chain
+
+
+def test_replace_on_a_gmsh_scene_keeps_its_mesh_file():
+    path = ROOT / "configs/example2.toml"
+    assert load(path).replace({"time": {"k": 0.05}}) == load(path, ["time.k=0.05"])
+
+
+@pytest.mark.parametrize("changes, key, value", [
+    ({"time": {"k": 0.3}}, "time.k", 0.3),
+    ({"mesh": {"nx": 0}}, "mesh.nx", 0),
+    ({"time": {"kk": 1}}, "time.kk", 1),
+    ({"time": {"k": {"a": 1}}}, "time.k", 0.01),  # a table where a value is
+])
+def test_replace_rejects_like_a_file(changes, key, value):
+    with pytest.raises(ConfigError) as err:
+        load(EX1).replace(changes, label="my study")
+    e = err.value
+    assert (e.key, e.value, e.source) == (key, value, f"{EX1} (my study)")
+    assert str(e).count("\n") == 0 and str(e).startswith(f"{EX1} (my study): {key} = ")
+
+
+def test_replace_applies_the_checks_across_sections():
+    cfg = load(EX1)
+    with pytest.raises(ConfigError) as err:  # [solver] reads [time]
+        cfg.replace({"time": {"order": 2}, "solver": {"damage_scheme": "semi_implicit"}})
+    assert err.value.key == "solver.damage_scheme" and err.value.source == f"{EX1} (replace())"
+    with pytest.raises(ConfigError) as err:  # [memory] reads [time]
+        cfg.replace({"time": {"order": 2}, "memory": {"rule": "left"}})
+    assert err.value.key == "memory.rule"
+    with pytest.raises(ConfigError) as err:  # [accuracy] reads the mesh's dimension
+        load(ROOT / "configs/example1_3d.toml").replace({"accuracy": {"tolerance": 1e-2}})
+    assert err.value.key == "accuracy.tolerance"
+
+
+def test_replace_without_a_document_uses_the_resolved_scene():
+    cfg = Config(**{**from_dict({}).__dict__, "document": None})
+    assert cfg.replace({"mesh": {"nx": 8}}).mesh.nx == 8

@@ -18,7 +18,7 @@ from .material import MODELS, MaterialConfig
 from .memory import KERNELS, MemoryConfig
 from .mesh import DIAGONALS, MAX_CELLS, MeshConfig
 from .output import OutputConfig
-from .scene import SECTIONS, Config, apply_overrides, dumps, from_dict, load, parse_override, to_dict
+from .scene import SECTIONS, Config, apply_overrides, dumps, from_dict, load, merge, parse_override, replace, to_dict
 from .solver import DAMAGE_SCHEMES, METHODS, SolverConfig
 from .time import TimeConfig
 
@@ -28,5 +28,5 @@ __all__ = [
     "MemoryConfig", "MeshConfig", "OutputConfig", "SolverConfig", "TimeConfig", "SECTIONS", "PAPER_BOUNDARIES", "ROLES",
     "LAWS", "SIDES", "MODELS",
     "KERNELS", "DIAGONALS", "MAX_CELLS", "METHODS", "DAMAGE_SCHEMES", "apply_overrides", "dumps", "from_dict",
-    "load", "parse_override", "to_dict", "table_at",
+    "load", "merge", "parse_override", "replace", "to_dict", "table_at",
 ]

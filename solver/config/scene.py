@@ -8,6 +8,8 @@ row here.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -74,6 +76,9 @@ class Config:
     output: OutputConfig = field(default_factory=OutputConfig)
     accuracy: AccuracyConfig = field(default_factory=AccuracyConfig)
     source: str = "<defaults>"
+    # the document as given (file and --set, before defaults are resolved) and its directory: what replace() edits
+    document: dict | None = field(default=None, compare=False, repr=False)
+    base: Path | None = field(default=None, compare=False, repr=False)
 
     @property
     def dim(self) -> int:
@@ -97,6 +102,11 @@ class Config:
         """Parts that prescribe displacements: clamped and displacement."""
         return tuple(b for b in self.boundaries if b.dirichlet)
 
+    def replace(self, changes: dict, label: str = "replace()") -> Config:
+        """This scene with ``changes`` (TOML-shaped, e.g. ``{"time": {"k": 0.005}}``), validated as a file is
+        (:func:`replace`)."""
+        return replace(self, changes, label)
+
 
 def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> Config:
     """Validate a parsed TOML document and build a :class:`Config`."""
@@ -113,7 +123,7 @@ def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> C
         if s.key == "mesh":
             m = scene["mesh"]
             scene["dim"] = mesh.gmsh_dim(m.file) if m.kind == "gmsh" else m.dim
-    return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source)
+    return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source, document=copy.deepcopy(data), base=base)
 
 
 def parse_override(item: str) -> tuple[list[str], Any]:
@@ -162,6 +172,37 @@ def load(path: str | Path, overrides: list[str] | None = None) -> Config:
         raise ConfigError(f"{path}: the scene file is empty (a scene needs at least one section)")
     data = apply_overrides(data, overrides or [])
     return from_dict(data, source=str(path), base=path.parent.resolve())
+
+
+def replace(cfg: Config, changes: dict, label: str = "replace()") -> Config:
+    """``cfg`` with ``changes`` (TOML-shaped) merged into its document and validated by :func:`from_dict`: the same
+    checks and one-line ConfigErrors as a scene file, their source ``"<cfg.source> (<label>)"``. The result keeps
+    ``cfg.source`` and equals loading the file with the equivalent ``--set``.
+
+    The document is the one given (``cfg.document``), not :func:`to_dict`'s resolved scene, where derived values
+    are fixed (``memory.rule = 'auto'``, the quadrature degrees): a new ``time.order`` or degree re-derives them as
+    in a file. A Config built without a document (by hand) falls back to :func:`to_dict`.
+    """
+    source = f"{cfg.source} ({label})"
+    data = merge(to_dict(cfg) if cfg.document is None else cfg.document, changes, Ctx(source))
+    return dataclasses.replace(from_dict(data, source=source, base=cfg.base), source=cfg.source)
+
+
+def merge(data: dict, changes: dict, ctx: Ctx | None = None, prefix: str = "") -> dict:
+    """``data`` with ``changes`` merged in, table by table (a new dict: neither argument is changed)."""
+    ctx = ctx or Ctx("merge()")
+    if not isinstance(changes, dict):
+        raise ctx.fail(prefix.rstrip(".") or "<changes>", changes, "must be a table of changes")
+    out = dict(data)
+    for key, value in changes.items():
+        if isinstance(value, dict):
+            node = out.get(key, {})
+            if not isinstance(node, dict):
+                raise ctx.fail(prefix + key, node, "is not a table")
+            out[key] = merge(node, value, ctx, f"{prefix}{key}.")
+        else:
+            out[key] = value
+    return out
 
 
 def to_dict(cfg: Config) -> dict:

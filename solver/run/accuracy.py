@@ -45,11 +45,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
+from solver.config import merge
 from solver.errors import ConfigError, SolveFailure, ToleranceError
 
 # C times 2 mu (mu the shear modulus E / (2 (1 + nu))): C measured on Example 1 (E = 100, nu = 0.3), rounded up
@@ -82,7 +82,7 @@ class Plan:
     order: int
     k: float
     geo: object  # Geometry of the chosen (adapted) mesh
-    start: list[str]  # overrides of the start mesh
+    start: dict  # the start mesh's changes to the scene ({} or {"mesh": {"nx": .., "ny": ..}})
     estimate: dict[str, float]  # space_u, space_zeta, time: each a bound of its part
     C: float
     growth: float
@@ -90,11 +90,17 @@ class Plan:
     time_profile: tuple[np.ndarray, np.ndarray]  # (t, estimated time error at k) from the pilot runs
     adaptation: list[dict] = field(default_factory=list)
     seconds: float = 0.0
+    scene: object = None  # the Config planned for
 
     @property
-    def overrides(self) -> list[str]:
-        """The scene overrides of the chosen degrees, order and step (the mesh is ``geo``)."""
-        return [*self.start, *degrees(self.degree), f"time.order={self.order}", f"time.k={self.k!r}"]
+    def changes(self) -> dict:
+        """The changes to the scene of the chosen degrees, order and step (the mesh is ``geo``)."""
+        return _merged(self.start, degrees(self.degree), {"time": {"order": self.order, "k": self.k}})
+
+    @property
+    def config(self):
+        """The scene planned for with the chosen degrees, order and step: what the run is built from."""
+        return self.scene.replace(self.changes, label="plan")
 
     def time_error(self, t: float) -> float:
         ts, es = self.time_profile
@@ -110,9 +116,26 @@ class Plan:
                 "planning_seconds": self.seconds}
 
 
-def degrees(d: int) -> list[str]:
-    """The overrides of degree ``d`` for u and zeta alike: zeta's degree follows u's (module docstring)."""
-    return [f"discretization.u_degree={d}", f"discretization.zeta_degree={d}"]
+def degrees(d: int) -> dict:
+    """The changes of degree ``d`` for u and zeta alike: zeta's degree follows u's (module docstring)."""
+    return {"discretization": {"u_degree": d, "zeta_degree": d}}
+
+
+def _with(cfg, *changes: dict):
+    """``cfg`` with ``changes`` (validated: :meth:`Config.replace`)."""
+    return cfg.replace(_merged(*changes), label="accuracy plan")
+
+
+def _merged(*changes: dict) -> dict:
+    """One table of changes from several (the later win)."""
+    out: dict = {}
+    for c in changes:
+        out = merge(out, c)
+    return out
+
+
+def _k(k: float) -> dict:
+    return {"time": {"k": k}}
 
 
 def contradicting(overrides: list[str]) -> list[str]:
@@ -120,37 +143,30 @@ def contradicting(overrides: list[str]) -> list[str]:
     return [o for o in overrides if o.split("=", 1)[0].strip() in CHOSEN_KEYS]
 
 
-def _load(path: Path, overrides: list[str]):
-    from solver.config import load
-
-    return load(path, [*overrides, "output.xdmf=false"])
-
-
-def _start_mesh(path: Path, overrides: list[str], comm: MPI.Comm) -> list[str]:
+def _start_mesh(cfg, comm: MPI.Comm) -> dict:
     """A coarse start for a built-in rectangle: about 4 cells across its shorter side (doubled until the boundary
-    parts' ends fall on nodes); a gmsh mesh starts as it is."""
+    parts' ends fall on nodes); a gmsh mesh starts as it is. Returns the scene's changes."""
     from solver.mesh.geometry import build
 
-    cfg = _load(path, overrides)
     if cfg.mesh.kind != "rectangle":
-        return []
+        return {}
     (x0, y0), (x1, y1) = cfg.mesh.corners
     h = min(x1 - x0, y1 - y0) / 4
     for scale in (1, 2, 4, 8, 16):
         nx, ny = max(1, round((x1 - x0) / h)) * scale, max(1, round((y1 - y0) / h)) * scale
-        start = [f"mesh.nx={nx}", f"mesh.ny={ny}"]
+        start = {"mesh": {"nx": nx, "ny": ny}}
         try:
-            build(comm, _load(path, [*overrides, *start]).mesh, cfg.boundaries, cfg.dim)
+            build(comm, _with(cfg, start).mesh, cfg.boundaries, cfg.dim)
             return start
         except ConfigError:
             continue
-    return []
+    return {}
 
 
-def _order(path: Path, overrides: list[str]) -> int:
+def _order(cfg) -> int:
     """2 where the scene allows the second-order scheme, else 1."""
     try:
-        _load(path, [*overrides, "time.order=2"])
+        _with(cfg, {"time": {"order": 2}})
         return 2
     except ConfigError:
         return 1
@@ -175,12 +191,12 @@ def _elastic(cfg):
 class _Level0:
     """The t = 0 problem on a mesh: its solution, eta_K^2 and eta."""
 
-    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
+    def __init__(self, cfg, comm: MPI.Comm, geo) -> None:
         from solver.physics.estimator import estimator_for
         from solver.run.model import build_model
         from solver.run.stepper import Stepper
 
-        cfg = _elastic(_load(path, overrides))
+        cfg = _elastic(cfg)
         self.model = build_model(cfg, comm, geo)
         row = Stepper(self.model).step(0)
         self.strain_norm = row["strain_norm"]
@@ -195,15 +211,13 @@ class _Worst:
     (scenes whose load starts at zero have nothing to adapt to at t = 0). A step Newton cannot take on a finer
     mesh is halved (up to 3 times)."""
 
-    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, geo) -> None:
+    def __init__(self, cfg, comm: MPI.Comm, geo) -> None:
         from solver.physics.estimator import estimator_for
         from solver.run.model import build_model
         from solver.run.stepper import levels
 
-        cfg = _load(path, overrides)
         for halving in range(4):
-            k = cfg.time.k / 2**halving
-            self.model = model = build_model(_load(path, [*overrides, f"time.k={k!r}"]), comm, geo)
+            self.model = model = build_model(_with(cfg, _k(cfg.time.k / 2**halving)), comm, geo)
             est = estimator_for(model)
             worst: list = [-1.0, None]
 
@@ -234,12 +248,11 @@ def _theta(theta: float, ratio: float) -> float:
 class _Pilot:
     """A run on a fixed mesh that keeps u and zeta at every level (and eta_n with ``estimate``)."""
 
-    def __init__(self, path, overrides, comm, geo, estimate: bool = False) -> None:
+    def __init__(self, cfg, comm, geo, estimate: bool = False) -> None:
         from solver.physics.estimator import estimator_for
         from solver.run.model import build_model
         from solver.run.stepper import levels
 
-        cfg = _load(path, overrides)
         self.model = model = build_model(cfg, comm, geo)
         est = estimator_for(model) if estimate else None
         self.u, self.zeta, self.eta, self.t = [], [], [], []
@@ -306,18 +319,17 @@ def _time_estimate(runs: list[_Pilot], order: int, comm) -> tuple[float, float, 
     return p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1)
 
 
-def _zeta_runs(path, overrides, comm, geos, kept: dict) -> list[_Pilot]:
+def _zeta_runs(cfg, comm, geos, kept: dict) -> list[_Pilot]:
     """Runs at the same step on nested meshes (the time error cancels in their differences) of a scene with
     damage. If Newton fails on one, all are repeated with half the step. ``kept``: runs already made, by (mesh,
     step)."""
-    k = _load(path, overrides).time.k
     for halving in range(4):
-        step = k / 2**halving
-        over = [*overrides, f"time.k={step!r}"]
+        step = cfg.time.k / 2**halving
+        at_step = _with(cfg, _k(step))
         try:
             for geo in geos:
                 if (id(geo), step) not in kept:
-                    kept[id(geo), step] = _Pilot(path, over, comm, geo)
+                    kept[id(geo), step] = _Pilot(at_step, comm, geo)
             return [kept[id(geo), step] for geo in geos]
         except SolveFailure:
             if halving == 3:
@@ -366,7 +378,7 @@ def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float, zet
     return 0.5 * (lo + hi)
 
 
-def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None) -> tuple[float, object | None]:
+def _zeta_space(cfg, comm, geo, earlier=(), kept: dict | None = None) -> tuple[float, object | None]:
     """Estimate of zeta's space error on ``geo``, from its differences to ``earlier`` meshes that ``geo`` refines
     (the coarsest first), with e(N) = A N^-s over the number of cells N:
     - two earlier meshes a, b: s observed from the two differences (:func:`observed_exponent`: at least 1/2, a
@@ -378,12 +390,11 @@ def _zeta_space(path, overrides, comm, geo, earlier=(), kept: dict | None = None
     and the uniform refinement (or None)."""
     from solver.mesh.adapt import refine_uniformly
 
-    cfg = _load(path, overrides)
     if not cfg.damage.enabled:
         return 0.0, None
     finer = None if earlier else refine_uniformly(geo)
     meshes = [*earlier[-2:], geo] if earlier else [geo, finer]
-    runs = _zeta_runs(path, overrides, comm, meshes, {} if kept is None else kept)
+    runs = _zeta_runs(cfg, comm, meshes, {} if kept is None else kept)
     cells = [m.num_cells() for m in meshes]
     if finer is not None:
         return 2.0 * _zeta_difference(runs[0], runs[1], comm), finer
@@ -412,35 +423,34 @@ class _Step:
 class _Planner:
     """One plan (:func:`plan`), in the module docstring's order: the step (:meth:`_step`), the degree
     (:meth:`_degree`), u's mesh (:meth:`_mesh`) and zeta's part (:meth:`_fit_zeta`). Holds what the stages
-    share: the scene's path and overrides, the absolute tolerance, the constants C per degree, each degree's
-    sequence of solved meshes and the zeta runs already made."""
+    share: the scene (loaded once; each candidate is a ``replace()`` of it), the absolute tolerance, the constants
+    C per degree, each degree's sequence of solved meshes and the zeta runs already made."""
 
-    def __init__(self, path: Path, overrides: list[str], comm: MPI.Comm, log) -> None:
+    def __init__(self, scene, comm: MPI.Comm, log) -> None:
         from solver.mesh.geometry import build
 
         self.t_start = time.perf_counter()
-        self.path, self.comm, self.log = path, comm, log
-        cfg = _load(path, overrides)
-        self.acc = acc = cfg.accuracy
+        self.scene, self.comm, self.log = scene, comm, log
+        self.acc = acc = scene.accuracy
         if not acc.enabled:
             raise ValueError("plan: the scene has no accuracy.tolerance")
-        self.start = _start_mesh(path, overrides, comm)
-        base = [*overrides, *self.start]
-        self.order = _order(path, base)
+        cfg = _with(scene, {"output": {"xdmf": False}})
+        self.start = _start_mesh(cfg, comm)
+        self.order = _order(_with(cfg, self.start))
         self.T = cfg.time.T
-        self.base = [*base, f"time.order={self.order}"]
-        self.geo0 = build(comm, _load(path, self.base).mesh, cfg.boundaries, cfg.dim)
+        self.base = _with(cfg, self.start, {"time": {"order": self.order}})
+        self.geo0 = build(comm, self.base.mesh, cfg.boundaries, cfg.dim)
         two_mu = cfg.material.E / (1.0 + cfg.material.nu)
         self.Cs = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
         self.tol = acc.tolerance
         if acc.relative:
-            lv = _Level0(path, [*self.base, *degrees(max(acc.degrees))], comm, self.geo0)
+            lv = _Level0(_with(self.base, degrees(max(acc.degrees))), comm, self.geo0)
             self.tol = acc.tolerance * lv.strain_norm
             log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {self.tol:.4g}")
         self.seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
         self.runs: dict = {}  # zeta's runs, by (mesh, step)
         # set by plan(): what a mesh is solved with (the t = 0 problem or coarse-step runs), eta's growth factor
-        # applied to its estimate, and the overrides of those solves
+        # applied to its estimate, and the scene of those solves
         self.level, self.g, self.over = _Level0, 1.0, self.base
 
     @property
@@ -455,18 +465,19 @@ class _Planner:
         share = self.tol - step.error
         # the space estimate: the t = 0 problem times the growth, or, where eta grows more than GROWTH_AT_0 (a
         # load that starts small), coarse-step runs to the level of largest eta (their largest eta counts)
-        at_k0 = [*self.base, f"time.k={step.k0!r}"]
+        at_k0 = _with(self.base, _k(step.k0))
         self.over, self.level, self.g = at_k0, _Level0, step.growth
         if step.growth > GROWTH_AT_0:
-            self.over, self.level, self.g = [*at_k0, f"time.T={step.worst_t!r}"], _Worst, 1.0
+            self.over, self.level, self.g = _with(at_k0, {"time": {"T": step.worst_t}}), _Worst, 1.0
             self.log(f"  the mesh is adapted to the level of largest eta, t = {step.worst_t:g}")
         degree, (geo, eta2) = self._degree(share)
         geo, eta2 = self._mesh(degree, share, geo, eta2)
         # zeta's runs go to the scene's T at the pilots' coarsest step
-        geo, zeta_space = self._fit_zeta(degree, share, geo, eta2, [*at_k0, *degrees(degree)])
+        geo, zeta_space = self._fit_zeta(degree, share, geo, eta2, _with(at_k0, degrees(degree)))
         estimate = {"space_u": self.seqs[degree][-1]["estimate"] * self.G, "space_zeta": zeta_space, "time": step.error}
         out = Plan(self.tol, degree, self.order, step.k, geo, self.start, estimate, self.Cs[degree], step.growth,
-                   step.rate, (step.times, step.profile), [r for d in self.acc.degrees for r in self.seqs[d]])
+                   step.rate, (step.times, step.profile), [r for d in self.acc.degrees for r in self.seqs[d]],
+                   scene=self.scene)
         out.seconds = time.perf_counter() - self.t_start
         self.log(f"chosen: P{degree} (u and zeta), order {self.order}, k = {step.k:g} ({round(self.T / step.k)} "
                  f"steps), {geo.num_cells()} cells; estimated error <= {sum(estimate.values()):.3e} (space "
@@ -479,10 +490,10 @@ class _Planner:
         cheapest), which also gives how eta evolves over the run; the largest T / (N0 2^j) whose time error is
         within SAFETY times its share."""
         k0 = self.T / N0
-        pilot = [*self.base, *degrees(min(self.acc.degrees))]
+        pilot = _with(self.base, degrees(min(self.acc.degrees)))
         for _ in range(6):  # a start step the scheme cannot take is halved, and the three runs start again
             try:
-                pilots = [_Pilot(self.path, [*pilot, f"time.k={k0 / 2**j!r}"], self.comm, self.geo0,
+                pilots = [_Pilot(_with(pilot, _k(k0 / 2**j)), self.comm, self.geo0,
                                  estimate=(j == 0)) for j in range(3)]
                 break
             except SolveFailure:
@@ -527,7 +538,7 @@ class _Planner:
             geo, eta2 = self._adapt(self.over, degree, target, marked=(geo, eta2))
         return geo, eta2
 
-    def _fit_zeta(self, degree: int, share: float, geo, eta2, run_k0: list[str]) -> tuple:
+    def _fit_zeta(self, degree: int, share: float, geo, eta2, run_k0) -> tuple:
         """zeta's space error on ``geo``, from its differences to up to two earlier meshes of the sequence (each with
         at most a quarter of the next one's cells) or to its uniform refinement. While the two space parts exceed
         the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
@@ -540,7 +551,7 @@ class _Planner:
         for r in reversed(seq):
             if "_geo" in r and len(chain) < 2 and r["cells"] * 4 <= (chain[0] if chain else geo).num_cells():
                 chain.insert(0, r["_geo"])
-        zeta_space, finer = _zeta_space(self.path, run_k0, self.comm, geo, chain, self.runs)
+        zeta_space, finer = _zeta_space(run_k0, self.comm, geo, chain, self.runs)
         self.log(f"  zeta's space error on it <= {zeta_space:.3e}")
         while seq[-1]["estimate"] * G + zeta_space > share:
             if zeta_space <= ROOM_ZETA_MAX * share:
@@ -553,8 +564,8 @@ class _Planner:
                 raise ToleranceError(self.tol, zeta_space, finer.num_cells(),
                                      "accuracy.max_dofs (the damage's space error)", target=share - seq[-1]["estimate"] * G)
             chain, geo = [*chain, geo][-2:], finer
-            zeta_space, finer = _zeta_space(self.path, run_k0, self.comm, geo, chain, self.runs)
-            lv = self.level(self.path, [*self.over, *degrees(degree)], self.comm, geo)
+            zeta_space, finer = _zeta_space(run_k0, self.comm, geo, chain, self.runs)
+            lv = self.level(_with(self.over, degrees(degree)), self.comm, geo)
             eta2 = lv.eta2
             seq.append({"degree": degree, "cells": geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                         "estimate": C * lv.eta, "uniform": True})
@@ -562,7 +573,7 @@ class _Planner:
                      f"error <= {zeta_space:.3e}")
         return geo, zeta_space
 
-    def _make_room(self, degree: int, share: float, run_k0: list[str], geo, eta2, zeta_space: float):
+    def _make_room(self, degree: int, share: float, run_k0, geo, eta2, zeta_space: float):
         """A Dörfler step for u that leaves zeta's part room within the space share, instead of a uniform refinement.
 
         On the mesh M (``geo``, with its eta_K^2) zeta's error is at most ``zeta_space``; u is adapted on from M to
@@ -575,8 +586,8 @@ class _Planner:
         target = (share - (1.0 + ROOM_MARGIN) * zeta_space) / G
         finer, _ = self._adapt(self.over, degree, target, marked=(geo, eta2))
         bound = zeta_space
-        if _load(self.path, run_k0).damage.enabled:
-            bound += _zeta_difference(*_zeta_runs(self.path, run_k0, self.comm, [geo, finer], self.runs), self.comm)
+        if run_k0.damage.enabled:
+            bound += _zeta_difference(*_zeta_runs(run_k0, self.comm, [geo, finer], self.runs), self.comm)
         total = seq[-1]["estimate"] * G + bound
         self.log(f"  a Dörfler step for u: {finer.num_cells()} cells, C eta = {seq[-1]['estimate']:.3e}, zeta's "
                  f"space error <= {bound:.3e}: {'taken' if total <= share else 'over the share, refined uniformly instead'}")
@@ -585,7 +596,7 @@ class _Planner:
         del seq[n:]
         return None
 
-    def _adapt(self, overrides: list[str], degree: int, target: float, geo=None, max_steps: int | None = None,
+    def _adapt(self, scene, degree: int, target: float, geo=None, max_steps: int | None = None,
                marked: tuple | None = None) -> tuple:
         """Dörfler-refine until C eta <= target (or ``max_steps`` meshes solved), appending each mesh's record to
         the degree's sequence; beyond ``accuracy.max_dofs``, a ToleranceError for the user's tolerance. Starts on
@@ -604,7 +615,7 @@ class _Planner:
             geo = refined(*marked)
         solved = 0
         while True:
-            lv = self.level(self.path, [*overrides, *degrees(degree)], self.comm, geo)
+            lv = self.level(_with(scene, degrees(degree)), self.comm, geo)
             rec = {"degree": degree, "cells": lv.model.geo.num_cells(), "dofs": lv.dofs, "eta": lv.eta,
                    "estimate": C * lv.eta, "_geo": lv.model.geo}
             seq.append(rec)
@@ -618,9 +629,10 @@ class _Planner:
             geo = refined(lv.model.geo, lv.eta2)
 
 
-def plan(path: Path, overrides: list[str], comm: MPI.Comm, log=print) -> Plan:
-    """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective)."""
-    return _Planner(path, overrides, comm, log).plan()
+def plan(scene, comm: MPI.Comm, log=print) -> Plan:
+    """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective): ``scene`` is a Config,
+    and the run's is ``plan(...).config``."""
+    return _Planner(scene, comm, log).plan()
 
 
 class ErrorSensor:
