@@ -6,6 +6,7 @@ import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,6 +135,7 @@ def test_paraview_readers_read_the_series(tmp_path, paraview, closed):
     Xdmf3ReaderS/T the stress is a symmetric tensor whose components ParaView names XX ... XZ. Also the
     padded file a killed run leaves (closed=False)."""
     from mpi4py import MPI
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "io"))  # the series fixture of tests/io/test_xdmf.py
     from test_xdmf import FIELDS, Scene
 
     scene = Scene(MPI.COMM_SELF, n=3)

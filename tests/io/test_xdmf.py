@@ -344,7 +344,7 @@ def _run(script: Path, args: list[str], nproc: int, env: dict) -> subprocess.Com
 @pytest.mark.parametrize("background", [False, True], ids=["at-once", "background"])
 def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc, background):
     script = tmp_path / "killed.py"
-    script.write_text(KILLED.format(tests=str(ROOT / "tests"), background=0 if background else 2**40))
+    script.write_text(KILLED.format(tests=str(Path(__file__).resolve().parent), background=0 if background else 2**40))
     out = tmp_path / "out"
     env = dict(mpi_env(), PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     res = _run(script, [str(out)], nproc, dict(env, SOLVER_TEST_KILL=f"{stage}:{at}"))
