@@ -7,7 +7,9 @@ Callers decide by type and fields, never by the message text:
   line and the results directory, :class:`ToleranceError` for a tolerance out of reach
   (``tolerance``, ``estimate``, ``dofs``, ``limit``).
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
-  (filled in by the stepper, :meth:`SolveFailure.at`), and a ``status`` word for studies:
+  (filled in by the stepper, :meth:`SolveFailure.at`), and its ``kind`` in one word (diverged,
+  stagnated, too_many_iterations, damage_failed, non_finite, output_failed, singular), by which a
+  table of runs tallies its failures:
   :class:`DisplacementSolveError` (``method``, ``reason``, ``iterations``, ``residuals``,
   ``tolerance``), :class:`DamageSolveError` (``reason``), :class:`NonFiniteError` (``fields``),
   :class:`OutputError` (``reason``: writing results failed, e.g. a full disk).
@@ -17,8 +19,8 @@ from __future__ import annotations
 
 from typing import Any
 
-# displacement-solver reasons -> the study's status words
-_STATUS = {
+# displacement-solver reasons -> the failure's kind
+_KIND = {
     "DIVERGED_RESIDUAL_GROWTH": "diverged",
     "DIVERGED_FNORM_NAN": "diverged",
     "DIVERGED_STAGNATION": "stagnated",
@@ -84,7 +86,7 @@ class ToleranceError(InputError):
 class SolveFailure(CampoError, RuntimeError):
     """A run stopped at a time level (exit code 1). ``step``/``t`` are None until the stepper sets them."""
 
-    status = "failed"
+    kind = "failed"
 
     def __init__(self, detail: str, *, step: int | None = None, t: float | None = None) -> None:
         self.detail, self.step, self.t = detail, step, t
@@ -115,14 +117,14 @@ class DisplacementSolveError(SolveFailure):
                          f"last residuals [{tail}] (tolerance {tolerance:.3e})")
 
     @property
-    def status(self) -> str:  # type: ignore[override]
-        return _STATUS.get(self.reason, "failed")
+    def kind(self) -> str:  # type: ignore[override]
+        return _KIND.get(self.reason, "failed")
 
 
 class DamageSolveError(SolveFailure):
     """The damage step failed: its linear solve, or the semi-implicit step's stability condition."""
 
-    status = "damage_failed"
+    kind = "damage_failed"
 
     def __init__(self, reason: str, detail: str = "") -> None:
         self.reason = reason
@@ -132,7 +134,7 @@ class DamageSolveError(SolveFailure):
 class NonFiniteError(SolveFailure):
     """A field became NaN or inf."""
 
-    status = "non_finite"
+    kind = "non_finite"
 
     def __init__(self, fields: list[str]) -> None:
         self.fields = sorted(set(fields))
@@ -145,7 +147,7 @@ class OutputError(SolveFailure):
     ``level_t``: the time of the level whose write failed, when it is known (levels are written in
     the background, so the failure may be found a few levels later; the stepper reports this one)."""
 
-    status = "output_failed"
+    kind = "output_failed"
 
     def __init__(self, reason: str, level_t: float | None = None) -> None:
         self.reason, self.level_t = reason, level_t
@@ -155,7 +157,7 @@ class OutputError(SolveFailure):
 class RigidMotionError(SolveFailure):
     """The Dirichlet parts leave a rigid motion free, so the stiffness matrix is singular (found before solving)."""
 
-    status = "singular"
+    kind = "singular"
 
     def __init__(self, motions: list[str]) -> None:
         self.motions = list(motions)

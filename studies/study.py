@@ -59,7 +59,7 @@ def _status(failure: SolveFailure | None) -> tuple[str, str]:
     """The study's status word and reason for a run's outcome (from the failure's type and fields)."""
     if failure is None:
         return "converged", ""
-    return failure.status, str(failure)
+    return failure.kind, str(failure)
 
 
 def _point(ref, scene: str, label: str, mu: float, n: int, k: float, max_it: int) -> dict:

@@ -143,7 +143,7 @@ class Reference:
         try:
             run(model, None, on_step=compare)
         except SolveFailure as exc:
-            failure = exc.status
+            failure = exc.kind
         e = np.array(errs) if errs else np.full((1, 3), np.nan)
         total = e[:, 1] + e[:, 2]
         m = int(np.nanargmax(total)) if np.isfinite(total).any() else 0

@@ -1,4 +1,4 @@
-"""The failure types: fields, composed messages, and the status words studies use."""
+"""The failure types: fields, composed messages, and and the one-word kind of each failure."""
 
 import pytest
 
@@ -31,17 +31,17 @@ def test_a_failure_learns_where_it_happened():
     assert str(err.args[0]) == str(err)  # what an uncaught traceback would print
 
 
-@pytest.mark.parametrize("reason,status", [
+@pytest.mark.parametrize("reason,kind", [
     ("DIVERGED_RESIDUAL_GROWTH", "diverged"), ("DIVERGED_FNORM_NAN", "diverged"),
     ("DIVERGED_STAGNATION", "stagnated"), ("DIVERGED_MAX_IT", "too_many_iterations"),
     ("DIVERGED_LINEAR_SOLVE", "failed"),
 ])
-def test_status_words_follow_the_reason_field(reason, status):
-    assert DisplacementSolveError("newton", reason, 1, [1.0], 1.0).status == status
+def test_the_kind_follows_the_reason_field(reason, kind):
+    assert DisplacementSolveError("newton", reason, 1, [1.0], 1.0).kind == kind
 
 
-def test_other_failures_have_their_own_status():
-    assert DamageSolveError("DIVERGED_ITS").status == "damage_failed"
+def test_other_failures_have_their_own_kind():
+    assert DamageSolveError("DIVERGED_ITS").kind == "damage_failed"
     nf = NonFiniteError(["memory", "displacement", "memory"])
-    assert nf.fields == ["displacement", "memory"] and nf.status == "non_finite"
+    assert nf.fields == ["displacement", "memory"] and nf.kind == "non_finite"
     assert all(isinstance(e, SolveFailure) for e in (nf, DamageSolveError("x")))

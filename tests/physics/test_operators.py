@@ -156,7 +156,7 @@ def test_rotation_left_free_by_the_dirichlet_parts_is_named(comm):
                                   "top": {"role": "traction", "traction": [0.0, -1.0]}}})
     with pytest.raises(RigidMotionError) as err:
         build_model(cfg, comm)
-    assert err.value.motions == ["rotation about (0, 0)"] and err.value.status == "singular"
+    assert err.value.motions == ["rotation about (0, 0)"] and err.value.kind == "singular"
     assert "\n" not in str(err.value)
 
 

@@ -36,7 +36,7 @@ def test_fixed_point_converges_on_a_soft_foundation_only(comm):
     with pytest.raises(DisplacementSolveError) as err:
         solve(stiff, comm)
     assert (err.value.step, err.value.method, err.value.reason) == (0, "fixed_point", "DIVERGED_RESIDUAL_GROWTH")
-    assert err.value.status == "diverged"
+    assert err.value.kind == "diverged"
 
 
 def test_penalty_duality_fails_loudly_when_contact_releases(comm):
@@ -47,4 +47,4 @@ def test_penalty_duality_fails_loudly_when_contact_releases(comm):
     with pytest.raises(DisplacementSolveError) as err:
         solve(cfg, comm)
     assert (err.value.step, err.value.method, err.value.reason) == (3, "penalty_duality", "DIVERGED_STAGNATION")
-    assert err.value.t == pytest.approx(0.3) and err.value.status == "stagnated"
+    assert err.value.t == pytest.approx(0.3) and err.value.kind == "stagnated"
