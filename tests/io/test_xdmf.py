@@ -309,7 +309,7 @@ KILLED = """
 import sys
 import numpy as np
 from mpi4py import MPI
-sys.path.insert(0, {tests!r})
+sys.path[:0] = [{tests!r}, {tests!r} + "/.."]  # test_xdmf, and the conftest it imports
 import solver.io.xdmf as sx
 from test_xdmf import Scene
 sx.MAX_LEVELS_PER_CHUNK = 4
