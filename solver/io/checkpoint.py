@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import h5py
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -100,7 +101,6 @@ def write(directory: Path, model, step: int, t: float, part: int) -> None:
     gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
 
     def save() -> None:
-        import h5py
 
         path = Path(directory) / NAME
         tmp = path.with_name(NAME + ".tmp")
@@ -139,7 +139,6 @@ class Checkpoint:
 
 def read(directory: Path, model) -> Checkpoint:
     """Load the checkpoint into the model (u, zeta, history, solver state); refuse a mismatch clearly."""
-    import h5py
 
     comm = model.comm
     path = Path(directory) / NAME

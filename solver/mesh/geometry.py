@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
+from dolfinx import fem
 from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
@@ -45,7 +46,6 @@ class Geometry:
 
     def measure(self, name: str) -> float:
         """Length (area) of a named boundary part, summed over ranks."""
-        from dolfinx import fem
 
         return self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * self.ds(self.tags[name]))), op=MPI.SUM)
 

@@ -7,14 +7,15 @@ nest and the source degree is at most the target's. 2-D affine triangles, this p
 
 from __future__ import annotations
 
+import basix
 import numpy as np
 import scipy.sparse as sp
+from dolfinx import geometry
 
 
 def locate(mesh, points: np.ndarray):
     """The cell holding each point (2-D affine triangles), the cell's Jacobian (columns: edges) and the point's
     reference coordinates; raises ValueError if a point lies outside this process's cells."""
-    from dolfinx import geometry
 
     tdim = mesh.topology.dim
     pts = np.zeros((len(points), 3))
@@ -36,7 +37,6 @@ def tabulated(V, points: np.ndarray, derivatives: int):
     """V's element basis (and its reference derivatives up to ``derivatives``) at located points, with what a
     sparse matrix over V's local nodes needs: (cells' Jacobians, table (deriv, point, local dof), rows, cols,
     number of columns)."""
-    import basix
 
     cells, J, ref = locate(V.mesh, points)
     element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, V.ufl_element().degree(),

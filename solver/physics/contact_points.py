@@ -6,7 +6,9 @@ diagnostic reads them; both see exactly the discrete term that the UFL form inte
 
 from __future__ import annotations
 
+import basix
 import numpy as np
+import scipy.sparse as sp
 from mpi4py import MPI
 
 from solver.config import BoundaryConfig
@@ -62,8 +64,6 @@ class ContactPoints:
     """
 
     def __init__(self, geo: Geometry, V, parts: tuple[BoundaryConfig, ...], degree: int) -> None:
-        import basix
-        import scipy.sparse as sp
 
         mesh = geo.mesh
         tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1

@@ -25,12 +25,14 @@ from dataclasses import dataclass
 import basix
 import dolfinx.fem.petsc  # noqa: F401  (fem.petsc)
 import numpy as np
+import scipy.sparse as sp
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import MemoryConfig
+from solver.physics.material import strain, truncate
 
 _BASIX_CELL = {"triangle": basix.CellType.triangle, "tetrahedron": basix.CellType.tetrahedron}
 
@@ -135,7 +137,6 @@ class MemorySource:
 
     def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
                  L: float, keep: int = 0) -> None:
-        import scipy.sparse as sp
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
@@ -310,7 +311,6 @@ class MemoryForce:
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
-        import scipy.sparse as sp
 
         self.d, self.pairs = source.d, source.pairs
         self.weights = point_weights(rule, source)
@@ -580,7 +580,6 @@ class PlaneStrainHistory(History):
 
 def memory_source(u, zeta, A, L: float):
     """H = zeta Phi_L(A eps(u)): what the kernel integrates."""
-    from solver.physics.material import strain, truncate
 
     return zeta * truncate(A(strain(u)), L)
 
@@ -600,7 +599,6 @@ def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, step
 
 def trapezoid_term(history: PronyHistory, zeta, A, L: float):
     """(u, w) -> the trapezoid's current-level term (k/2) g(0) (zeta_n Phi_L(A eps(u_n)), eps(w)) over the rule's points."""
-    from solver.physics.material import strain
 
     rule = history.rule
     # a constant, not a number: not compiled into the form, and 0 at level 0, where M_0 = 0 (the history's commit

@@ -47,10 +47,18 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
-from solver.config import merge
+from solver.config import from_dict, merge, to_dict
 from solver.errors import ConfigError, SolveFailure, ToleranceError
+from solver.mesh.adapt import refine, refine_uniformly
+from solver.mesh.geometry import build
+from solver.mesh.transfer import interpolation_matrix
+from solver.physics.estimator import dorfler, estimator_for
+from solver.run.model import build_model
+from solver.run.stepper import Stepper, levels
 
 # C times 2 mu (mu the shear modulus E / (2 (1 + nu))): C measured on Example 1 (E = 100, nu = 0.3), rounded up
 C_TIMES_2MU = {1: 4.0e-3 * 100.0 / 1.3, 2: 1.8e-3 * 100.0 / 1.3}
@@ -146,7 +154,6 @@ def contradicting(overrides: list[str]) -> list[str]:
 def _start_mesh(cfg, comm: MPI.Comm) -> dict:
     """A coarse start for a built-in rectangle: about 4 cells across its shorter side (doubled until the boundary
     parts' ends fall on nodes); a gmsh mesh starts as it is. Returns the scene's changes."""
-    from solver.mesh.geometry import build
 
     if cfg.mesh.kind != "rectangle":
         return {}
@@ -180,7 +187,6 @@ def _dofs(model) -> int:
 
 def _elastic(cfg):
     """The scene without memory and damage: its level 0 (the elastic contact problem) is the same."""
-    from solver.config import from_dict, to_dict
 
     data = to_dict(cfg)
     data["memory"] = {"kernel": "none"}
@@ -192,9 +198,6 @@ class _Level0:
     """The t = 0 problem on a mesh: its solution, eta_K^2 and eta."""
 
     def __init__(self, cfg, comm: MPI.Comm, geo) -> None:
-        from solver.physics.estimator import estimator_for
-        from solver.run.model import build_model
-        from solver.run.stepper import Stepper
 
         cfg = _elastic(cfg)
         self.model = build_model(cfg, comm, geo)
@@ -212,9 +215,6 @@ class _Worst:
     mesh is halved (up to 3 times)."""
 
     def __init__(self, cfg, comm: MPI.Comm, geo) -> None:
-        from solver.physics.estimator import estimator_for
-        from solver.run.model import build_model
-        from solver.run.stepper import levels
 
         for halving in range(4):
             self.model = model = build_model(_with(cfg, _k(cfg.time.k / 2**halving)), comm, geo)
@@ -249,9 +249,6 @@ class _Pilot:
     """A run on a fixed mesh that keeps u and zeta at every level (and eta_n with ``estimate``)."""
 
     def __init__(self, cfg, comm, geo, estimate: bool = False) -> None:
-        from solver.physics.estimator import estimator_for
-        from solver.run.model import build_model
-        from solver.run.stepper import levels
 
         self.model = model = build_model(cfg, comm, geo)
         est = estimator_for(model) if estimate else None
@@ -271,8 +268,6 @@ class _Pilot:
 
 def _norms(model, comm: MPI.Comm):
     """||eps(v)|| and ||z|| of arrays on the model's spaces (collective)."""
-    import ufl
-    from dolfinx import fem
 
     V = model.u.function_space
     dv = fem.Function(V)
@@ -339,10 +334,7 @@ def _zeta_runs(cfg, comm, geos, kept: dict) -> list[_Pilot]:
 
 def _zeta_difference(coarse: _Pilot, fine: _Pilot, comm: MPI.Comm) -> float:
     """max over levels of ||zeta_coarse - zeta_fine||, the coarse zeta interpolated on the fine (nested) mesh."""
-    import ufl
-    from dolfinx import fem
 
-    from solver.mesh.transfer import interpolation_matrix
 
     Zf = fine.model.damage.V
     owned = Zf.dofmap.index_map.size_local
@@ -388,7 +380,6 @@ def _zeta_space(cfg, comm, geo, earlier=(), kept: dict | None = None) -> tuple[f
     - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
     ``kept``: the runs already made (:func:`_zeta_runs`). Returns the estimate (0 without damage: nothing is run)
     and the uniform refinement (or None)."""
-    from solver.mesh.adapt import refine_uniformly
 
     if not cfg.damage.enabled:
         return 0.0, None
@@ -427,7 +418,6 @@ class _Planner:
     C per degree, each degree's sequence of solved meshes and the zeta runs already made."""
 
     def __init__(self, scene, comm: MPI.Comm, log) -> None:
-        from solver.mesh.geometry import build
 
         self.t_start = time.perf_counter()
         self.scene, self.comm, self.log = scene, comm, log
@@ -544,7 +534,6 @@ class _Planner:
         the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
         step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
         mesh and zeta's bound on it."""
-        from solver.mesh.adapt import refine_uniformly
 
         seq, C, G = self.seqs[degree], self.Cs[degree], self.G
         chain: list = []  # the coarsest first
@@ -602,8 +591,6 @@ class _Planner:
         the degree's sequence; beyond ``accuracy.max_dofs``, a ToleranceError for the user's tolerance. Starts on
         ``geo``, or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Returns
         the last mesh and its eta_K^2."""
-        from solver.mesh.adapt import refine
-        from solver.physics.estimator import dorfler
 
         seq, C, acc = self.seqs[degree], self.Cs[degree], self.acc
 
@@ -641,7 +628,6 @@ class ErrorSensor:
     columns = ("est_space", "est_time")
 
     def __init__(self, model, plan: Plan) -> None:
-        from solver.physics.estimator import estimator_for
 
         self.est = estimator_for(model)
         self.plan = plan

@@ -13,7 +13,7 @@ import weakref
 from contextlib import ExitStack
 
 import numpy as np
-from dolfinx import fem
+from dolfinx import fem, la
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -153,7 +153,6 @@ def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elas
 def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
     """The rigid motions of a vector P-k space (3 in 2-D, 6 in 3-D), orthonormalized: GAMG's near-nullspace
     (built as in dolfinx's demo_elasticity.py)."""
-    from dolfinx import la
 
     imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     dim = V.mesh.geometry.dim
