@@ -31,11 +31,6 @@ class MeshConfig:
     nz: int = 16
 
     @property
-    def built_in(self) -> bool:
-        """Whether the mesh is a built-in rectangle or box (its sides are named, not physical groups)."""
-        return self.kind in BUILT_IN
-
-    @property
     def dim(self) -> int:
         """Geometric dimension of a built-in mesh (3 for a box, else 2)."""
         return 3 if self.kind == "box" else 2

@@ -26,7 +26,7 @@ from solver.config import BodyForceConfig, BoundaryConfig, MaterialConfig
 from solver.errors import RigidMotionError
 from solver.mesh.geometry import Geometry
 from solver.physics.material import elasticity, strain
-from solver.physics.memory import MemoryForce, MemorySource
+from solver.physics.memory_source import MemoryForce
 
 
 def assemble_without_diagonal(M: PETSc.Mat, form, bcs) -> None:
@@ -173,15 +173,8 @@ class Operators:
             load = load + ufl.inner(self.f0, self.w) * ufl.dx
         self.load_form = fem.form(load)
         self.history = history
-        self.memory_coupling = None  # the assembled memory coupling, where the history's source has no strain operator
-        self._memory_force: MemoryForce | None = None
-        if history is not None:
-            source = history.H
-            if isinstance(source, MemorySource):
-                self._memory_force = MemoryForce(history.rule, source)
-            else:
-                self.memory_coupling = fpetsc.assemble_matrix(fem.form(history.coupling(self.w)))
-                self.memory_coupling.assemble()
+        # B M = (M, eps(w)) from the source's strain operator (tested equal to the assembled coupling)
+        self._memory_force = MemoryForce(history.rule, history.H) if history is not None else None
 
         self.bulk = ufl.inner(elasticity(strain(self.du), material.E, material.nu, material.model),
                               strain(self.w)) * ufl.dx
@@ -199,7 +192,7 @@ class Operators:
 
     @property
     def memory_operator(self) -> MemoryForce | None:
-        """The operator that forms B M from the source's strain operator (None where B is assembled)."""
+        """The operator that forms B M from the source's strain operator (None without memory)."""
         return self._memory_force
 
     @property
@@ -223,9 +216,6 @@ class Operators:
         self.b.copy(self.loads)
         if self._memory_force is not None:
             self._memory_force(self.history.M, self._work)
-            self.b.axpy(-1.0, self._work)
-        elif self.memory_coupling is not None:
-            self.memory_coupling.mult(self.history.M.vector, self._work)
             self.b.axpy(-1.0, self._work)
         if self.dirichlet.inhomogeneous:
             with self._lift.localForm() as v:

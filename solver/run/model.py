@@ -16,15 +16,9 @@ from petsc4py import PETSc
 from solver.config import Config
 from solver.mesh.geometry import Geometry, build
 from solver.physics.material import elasticity, lame
-from solver.physics.memory import (
-    History,
-    MemorySource,
-    OutOfPlaneSource,
-    PlaneStrainHistory,
-    QuadratureRule,
-    make_history,
-    trapezoid_term,
-)
+from solver.physics.memory import History, PlaneStrainHistory, make_history, trapezoid_term
+from solver.physics.memory_source import MemorySource, OutOfPlaneSource
+from solver.physics.quadrature import QuadratureRule
 from solver.run.scheme import time_scheme
 from solver.solvers.damage import Damage, DamageLinearSolve, make_damage
 from solver.solvers.linear import choose_linear

@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from solver.errors import NonFiniteError, SolveFailure
 from solver.physics.diagnostics import DamageDiagnostics
-from solver.physics.memory import all_finite
+from solver.physics.quadrature import all_finite
 from solver.run.model import Model
 from solver.run.scheme import time_scheme
 

@@ -26,7 +26,8 @@ from solver.physics.contact import ContactTerm
 from solver.physics.contact_points import ContactPoints
 from solver.physics.diagnostics import DisplacementDiagnostics, Reactions
 from solver.physics.displacement import DisplacementProblem, SolveInfo
-from solver.physics.memory import History, PointStrainNorm
+from solver.physics.memory import History
+from solver.physics.memory_source import PointStrainNorm
 from solver.physics.operators import Dirichlet, Operators, check_rigid_motions
 from solver.solvers.fixed_point import FixedPointSolver, PenaltyDualitySolver
 from solver.solvers.newton import NewtonSolver

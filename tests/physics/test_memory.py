@@ -12,14 +12,9 @@ from mpi4py import MPI
 from solver.config import MemoryConfig, from_dict
 from solver.errors import ConfigError
 from solver.physics.material import elasticity, lame, strain
-from solver.physics.memory import (
-    MemorySource,
-    PronyHistory,
-    QuadratureRule,
-    TabulatedHistory,
-    make_history,
-    memory_source,
-)
+from solver.physics.memory import PronyHistory, TabulatedHistory, make_history, memory_source
+from solver.physics.memory_source import MemorySource
+from solver.physics.quadrature import QuadratureRule
 
 
 def A(eps):
@@ -81,7 +76,7 @@ def test_tabulated_kernel_matches_prony(comm):
     k, steps = 0.1, 8
     s = k * np.arange(steps + 2)
     table = tuple((float(si), float(-np.exp(-si))) for si in s)
-    src = rule.evaluator(memory_source(u, zeta, A, 1000.0), rule.space((2, 2)))
+    src = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), 1000.0)
     tab = make_history(MemoryConfig(kernel="tabulated", table=table), rule, src, k, steps)
     pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0,), times=(1.0,)), rule, src, k, steps)
     assert isinstance(tab, TabulatedHistory)
@@ -313,7 +308,7 @@ def test_extrapolated_source_from_kept_strains(comm, keep):
 
 def test_equal_is_exact():
     """The kept-strain lookup's comparison: a sample first, then every entry."""
-    from solver.physics.memory import _equal
+    from solver.physics.memory_source import _equal
 
     a = np.arange(1000.0)
     b = a.copy()
@@ -328,7 +323,7 @@ def test_equal_is_exact():
                                            ([1e308, 1e308, np.nan], False)])
 def test_all_finite_decides_like_isfinite(values, finite):
     """The one-sum NaN/inf test: an overflow of finite entries is not mistaken for an infinite one."""
-    from solver.physics.memory import all_finite
+    from solver.physics.quadrature import all_finite
 
     a = np.array(values, dtype=float)
     assert all_finite(a) is finite

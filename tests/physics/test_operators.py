@@ -4,6 +4,7 @@ moving prescribed displacement (its reaction at every level), and the rigid-moti
 
 import numpy as np
 import pytest
+import ufl
 from conftest import solve
 from mpi4py import MPI
 
@@ -172,7 +173,9 @@ def test_memory_force_is_the_assembled_coupling(comm, extra):
     M = model.history.M
     M.x.array[:] = np.sin(np.arange(M.x.array.size) + 1000.0 * comm.rank)
     M.x.scatter_forward()
-    B = fpetsc.assemble_matrix(fem.form(model.history.coupling(ops.w)))
+    # the definition: (S, eps(w)) for S in M's space, assembled
+    B = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.TrialFunction(M.function_space), ufl.sym(ufl.grad(ops.w)))
+                                        * model.history.rule.dx))
     B.assemble()
     want, got = ops.b.duplicate(), ops.b.duplicate()
     B.mult(M.vector, want)

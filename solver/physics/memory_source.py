@@ -1,0 +1,291 @@
+"""The fast evaluation of the memory's integrand H = zeta Phi_L(A eps(u)) and of its force on the nodes.
+
+The definition is the UFL expression :func:`solver.physics.memory.memory_source`; here it is
+evaluated as sparse products and numpy passes over the compact strain components (tested equal
+to the definition), with the pieces that share the strain: the out-of-plane H_33 of plane strain,
+the strain norm of the diagnostics, and B M = (M, eps(w)) from the same strain operator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import dolfinx.fem.petsc  # noqa: F401  (fem.petsc)
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from solver.physics.quadrature import QuadratureRule
+
+
+def _equal(a: np.ndarray, b: np.ndarray) -> bool:
+    """a == b entry by entry (exact); a sample of about 64 entries first settles most unequal pairs at once."""
+    stride = max(1, a.size // 64)
+    return a.shape == b.shape and np.array_equal(a[::stride], b[::stride]) and np.array_equal(a, b)
+
+
+class MemorySource:
+    """H = zeta Phi_L(A eps(u)) at the rule's points, as one sparse matvec and a few numpy passes.
+
+    eps(u) at the points is a fixed linear map of u's dofs: it is tabulated once (an
+    Expression with a trial function) into a sparse matrix ``strain_operator`` that gives the d(d+1)/2
+    independent components of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one
+    block of rows per component: 24 entries per point for P2 triangles, where the full
+    d*d tensor took 36. zeta at the points is a second, small product. A eps, the
+    truncation (skipped when no value reaches L: it is then the identity) and the factor
+    zeta act on the compact components; only the result is written out in the quadrature
+    space's d*d layout. Equal to the UFL expression ``memory_source`` (tested), which
+    remains the definition, and bit for bit equal to the full-tensor product it replaces.
+
+    The strain is linear in u, so H at an extrapolated u* = 2 u - u_prev follows from the
+    strains of u and u_prev (:meth:`extrapolated`): with ``keep`` > 0 the last ``keep``
+    strains of the field's values are kept, each with a copy of the values it belongs to, and
+    reused when asked for the same values again (an exact comparison: after a restart, or for
+    a u that changed, they are computed again).
+    """
+
+    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
+                 L: float, keep: int = 0) -> None:
+
+        d = rule.mesh.geometry.dim
+        self.Q = rule.space((d, d))
+        self.u, self.zeta, self.L, self.d = u, zeta, L, d
+        self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
+        self.keep = keep
+        self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
+        cells = rule.cells
+        npts = rule.points.shape[0]
+        rows_q = self.Q.dofmap.list.array.reshape(-1, npts)[: len(cells)]  # (cell, point) -> quadrature node
+
+        def tabulate(expr, space) -> np.ndarray:
+            """Values at the points of an expression in a scalar trial function: (cell, point, comp, dof)."""
+            vals = fem.Expression(expr, rule.points).eval(cells)
+            return vals.reshape(len(cells), npts, -1, space.dofmap.dof_layout.num_dofs)
+
+        size_q = self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts
+        self.size_q = size_q
+
+        def nodes_of(space) -> np.ndarray:
+            return space.dofmap.list.array.reshape(-1, space.dofmap.dof_layout.num_dofs)[: len(cells)]
+
+        # eps_ij = (d_j u_i + d_i u_j) / 2 from scalar P1 gradients (a vector trial function in an
+        # Expression corrupts memory in dolfinx 0.5.2); columns are u's blocked array indices
+        V = u.function_space
+        S = fem.FunctionSpace(rule.mesh, V.ufl_element().sub_elements()[0])
+        grad = tabulate(ufl.grad(ufl.TrialFunction(S)), S)  # (cell, point, j, a)
+        nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
+        bs = V.dofmap.index_map_bs
+        size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+        self.pairs = [(i, i) for i in range(d)] + [(i, j) for i in range(d) for j in range(i + 1, d)]
+        rows, cols, vals = [], [], []
+        for c, (i, j) in enumerate(self.pairs):
+            r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
+            for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
+                v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
+                rows.append(np.broadcast_to(r, v.shape).ravel())
+                cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
+                vals.append(v.ravel())
+        # duplicates (i == j: two halves) are summed exactly; rows sorted by column, as the full tensor's were
+        self.strain_operator = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                               shape=(len(self.pairs) * size_q, size_v)).tocsr()
+        self._work = np.empty((2, len(self.pairs), size_q))  # the extrapolated strain, A eps
+        self._trace = np.empty(size_q)
+        self.Zq = None
+        if isinstance(zeta, fem.Function):
+            Z = zeta.function_space
+            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
+            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
+            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
+            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
+            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+
+    def retain(self, count: int) -> None:
+        """Keep at least the last ``count`` strains of the field's own values: a consumer that reads a committed
+        strain again (the strain norm, H_33, the extrapolation's u_{n-2}) asks for it here, once."""
+        self.keep = max(self.keep, count)
+
+    def forget(self) -> None:
+        """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
+        self._cache.clear()
+
+    def strain(self, u: np.ndarray | None = None) -> np.ndarray:
+        """The independent components of eps(u) at the points, (component, point); u: the field's values by default.
+
+        Only strains of the field's own values are kept (the last ``keep`` of them, in the order computed);
+        one of another array is found among them or computed. The result may be a kept array: read it,
+        never change it."""
+        own = u is None
+        u = self.u.x.array if own else u
+        for values, eps in self._cache:
+            if _equal(values, u):
+                return eps
+        eps = (self.strain_operator @ u).reshape(len(self.pairs), -1)
+        if self.keep and own:
+            self._cache.insert(0, (u.copy(), eps))
+            del self._cache[self.keep:]
+        return eps
+
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """out = base + scale * H at the points for the current u and zeta (base None: scale * H), in the
+        quadrature space's layout (base may be out)."""
+        return self._source(self.strain(), out, scale, base)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     base: np.ndarray | None = None) -> np.ndarray:
+        """H at u* = 2 u - u_prev and the current zeta (as :meth:`__call__`): eps(u*) = 2 eps(u) - eps(u_prev),
+        exactly (to round-off), from the kept strains (or a product where one is missing)."""
+        eps = np.multiply(self.strain(), 2.0, out=self._work[0])
+        eps -= self.strain(u_prev)
+        return self._source(eps, out, scale, base)
+
+    def zeta_at_points(self) -> np.ndarray | float:
+        return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
+        d = self.d
+        a = np.multiply(eps, 2.0 * self.lame_mu, out=self._work[1])  # A eps = 2 mu eps + lambda tr(eps) I
+        tr = np.add(eps[0], eps[1], out=self._trace)
+        for i in range(2, d):
+            tr += eps[i]
+        tr *= self.lame_lambda
+        a[:d] += tr
+        if a.max() > self.L or a.min() < -self.L:  # the truncation acts (NaN: skipped, and kept, like clip's)
+            np.clip(a, -self.L, self.L, out=a)
+        z = self.zeta_at_points()
+        a *= z * scale if scale != 1.0 else z
+        if out is None:
+            out = np.empty(self.size_q * d * d)
+        full = out.reshape(-1, d * d)
+        start = base.reshape(-1, d * d) if base is not None else None
+        for c, (i, j) in enumerate(self.pairs):
+            for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
+                if start is None:
+                    full[:, col] = a[c]
+                else:
+                    np.add(start[:, col], a[c], out=full[:, col])
+        return out
+
+
+class PointStrainNorm:
+    """||eps(u)||_L2 from the source's strain at its points: sum over points of w_q |J_K| eps : eps.
+
+    Exact where the rule integrates eps : eps (degree >= 2 (p - 1), which the default memory rule
+    2 (p - 1) + q is). The strain of u_n computed here is kept by the source (``keep`` >= 1) and
+    is the one the next step's commit reads, so the norm costs one pass over the points instead
+    of a product with the strain Gram matrix."""
+
+    def __init__(self, source: MemorySource, weights: np.ndarray) -> None:
+        self.source, self.weights = source, weights
+        source.retain(1)
+        self.factors = [1.0 if i == j else 2.0 for i, j in source.pairs]  # eps_ij = eps_ji counted twice
+        self.comm = source.u.function_space.mesh.comm
+
+    def __call__(self) -> float:
+        eps = self.source.strain()
+        local = sum(f * float(np.dot(e * self.weights, e)) for f, e in zip(self.factors, eps))
+        return math.sqrt(max(self.comm.allreduce(local, op=MPI.SUM), 0.0))
+
+
+def point_weights(rule: QuadratureRule, source: MemorySource) -> np.ndarray:
+    """w_q |J_K| at each point of the source's quadrature space: the rule's weight times the cell's Jacobian
+    determinant on owned cells, 0 on ghost cells (their owners count them), so sums over points are integrals."""
+    mesh = rule.mesh
+    n_owned = mesh.topology.index_map(mesh.topology.dim).size_local
+    npts = rule.points.shape[0]
+    S0 = fem.FunctionSpace(mesh, ("DG", 0))
+    vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # owned cell volumes
+    cell_dofs = S0.dofmap.list.array[:n_owned]
+    # |J_K| = vol_K / (reference volume), the reference volume being the sum of the weights
+    weights = np.outer(vol.array_r[cell_dofs], rule.weights / rule.weights.sum())  # (owned cell, point)
+    vol.destroy()
+    nodes = source.Q.dofmap.list.array.reshape(-1, npts)[:n_owned]
+    w = np.zeros(source.size_q)
+    w[nodes.ravel()] = weights.ravel()
+    return w
+
+
+class MemoryForce:
+    """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one sparse product.
+
+    Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
+    P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
+    at n = 64, measured; a third of the step). It is also E^T W m: with w_q |J_K| the weight
+    of each point of an owned cell (0 on ghost cells, whose owners add their part),
+    (M, eps(w)) = sum_q w_q |J_K| (sum_i M_ii eps_ii(w) + sum_{i<j} (M_ij + M_ji) eps_ij(w)), so
+    m holds M's diagonal components and the sums of its off-diagonal pairs (M need not be
+    symmetric), and E is the source's strain operator of the independent components
+    (:class:`MemorySource`), transposed with the weights folded in once: 24 entries per P2
+    point, where the full-tensor operator has 36 and the assembled B 48. The product runs in
+    scipy on the local arrays, followed by one reverse scatter. Equal to B M to round-off
+    (tested).
+    """
+
+    def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
+
+        self.d, self.pairs = source.d, source.pairs
+        self.weights = point_weights(rule, source)
+        self.force_operator = (source.strain_operator.T @ sp.diags(np.tile(self.weights, len(self.pairs)))).tocsr()
+        self._m = np.empty((len(self.pairs), source.size_q))
+
+    def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
+        """out = B M (owned entries; ``out`` a ghosted vector of u's space)."""
+        d, m = self.d, self._m
+        full = M.x.array.reshape(-1, d * d)
+        for c, (i, j) in enumerate(self.pairs):
+            if i == j:
+                m[c] = full[:, i * d + i]
+            else:
+                np.add(full[:, i * d + j], full[:, j * d + i], out=m[c])
+        with out.localForm() as local:
+            local.array[:] = self.force_operator @ m.reshape(-1)
+        out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
+
+class OutOfPlaneSource:
+    """H_33 = zeta Phi_L(lambda tr eps(u)) at the rule's points: the 33 entry of zeta Phi_L(A eps(u)) in plane strain.
+
+    In plane strain eps_33 = 0, so (A eps)_33 = lambda (eps_11 + eps_22); Phi_L truncates
+    componentwise, so the 33 entry of the truncated tensor is the truncated 33 entry.
+    Uses the strain of the in-plane :class:`MemorySource`, which keeps its last one for it.
+    """
+
+    def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
+        self.source = source
+        source.retain(1)  # the in-plane commit's strain, read again here
+        self.Q = rule.space(())
+
+    def retain(self, count: int) -> None:
+        """H_33 reads the in-plane source's strains: that source keeps them."""
+        self.source.retain(count)
+
+    def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
+        """base + scale * H_33 (as :meth:`MemorySource.__call__`)."""
+        return self._source(self.source.strain(), out, scale, base)
+
+    def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
+                     base: np.ndarray | None = None) -> np.ndarray:
+        """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
+        src = self.source
+        eps = 2.0 * src.strain()[:2]
+        eps -= src.strain(u_prev)[:2]
+        return self._source(eps, out, scale, base)
+
+    def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
+                base: np.ndarray | None = None) -> np.ndarray:
+        src = self.source
+        h = eps[0] + eps[1]
+        h *= src.lame_lambda
+        np.clip(h, -src.L, src.L, out=h)
+        z = src.zeta_at_points()
+        h *= z * scale if scale != 1.0 else z
+        if base is not None:
+            h += base
+        if out is None:
+            return h
+        out[:] = h
+        return out
