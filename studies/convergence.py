@@ -203,8 +203,8 @@ class Reference:
         pz = np.empty(len(z_order), dtype=np.int64)
         pz[z_order] = np.arange(len(z_order))
         self.pu, self.pz = pu, pz  # grid order -> dof (the variants of solver/table1_variants.py assemble more norms)
-        self.Eg = petsc_to_scipy(E)[pu][:, pu].tocsr()
-        self.Mg = petsc_to_scipy(Mz)[pz][:, pz].tocsr()
+        self.strain_gram = petsc_to_scipy(E)[pu][:, pu].tocsr()
+        self.mass_zeta = petsc_to_scipy(Mz)[pz][:, pz].tocsr()
         self.slot = {round(t / k_ref): i for i, t in enumerate(self.times)}
         self._P: dict[int, sp.csr_matrix] = {}
 
@@ -236,7 +236,7 @@ class Reference:
             i = self.slot[round(row["t"] / self.k)]
             du = (self.data[i, :, :2] - P @ fields.u()).ravel()
             dz = self.data[i, :, 2] - P @ fields.zeta()
-            errs.append((row["t"], float(np.sqrt(du @ (self.Eg @ du))), float(np.sqrt(dz @ (self.Mg @ dz)))))
+            errs.append((row["t"], float(np.sqrt(du @ (self.strain_gram @ du))), float(np.sqrt(dz @ (self.mass_zeta @ dz)))))
 
         def record() -> dict:
             e = np.array(errs) if errs else np.zeros((1, 3))

@@ -136,7 +136,7 @@ class FineReference:
         z, xi = ufl.TrialFunction(Z), ufl.TestFunction(Z)
         Mz = fem.petsc.assemble_matrix(fem.form(z * xi * ufl.dx))
         Mz.assemble()
-        self.E, self.Mz = petsc_to_scipy(E), petsc_to_scipy(Mz)
+        self.strain_gram, self.mass_zeta = petsc_to_scipy(E), petsc_to_scipy(Mz)
         self.u_points = V.tabulate_dof_coordinates()[:, :2]  # one row per node
         self.z_points = Z.tabulate_dof_coordinates()[:, :2]
 
@@ -149,7 +149,7 @@ class FineReference:
         """(||eps(u_ref - u)||, ||zeta_ref - zeta||) with u, zeta already on the reference's dofs."""
         du = self.data[step, : self.nu] - u
         dz = self.data[step, self.nu:] - zeta
-        return float(np.sqrt(max(du @ (self.E @ du), 0.0))), float(np.sqrt(max(dz @ (self.Mz @ dz), 0.0)))
+        return float(np.sqrt(max(du @ (self.strain_gram @ du), 0.0))), float(np.sqrt(max(dz @ (self.mass_zeta @ dz), 0.0)))
 
     def measure(self, overrides: list[str], n: int, k: float) -> dict:
         """Run the scene at (n, k) with ``overrides`` and return its error record and time-loop seconds."""

@@ -156,8 +156,8 @@ def fine_forms(ref: Reference) -> list[sp.csr_matrix]:
         A.assemble()
         return petsc_to_scipy(A)[perm][:, perm].tocsr()
 
-    return [ref.Eg, grid(shear(du) * shear(w) * ufl.dx, ref.pu), grid(ufl.inner(ufl.grad(du), ufl.grad(w)) * ufl.dx, ref.pu),
-            grid(ufl.inner(du, w) * ufl.dx, ref.pu), ref.Mg, grid(ufl.inner(ufl.grad(z), ufl.grad(xi)) * ufl.dx, ref.pz)]
+    return [ref.strain_gram, grid(shear(du) * shear(w) * ufl.dx, ref.pu), grid(ufl.inner(ufl.grad(du), ufl.grad(w)) * ufl.dx, ref.pu),
+            grid(ufl.inner(du, w) * ufl.dx, ref.pu), ref.mass_zeta, grid(ufl.inner(ufl.grad(z), ufl.grad(xi)) * ufl.dx, ref.pz)]
 
 
 def injection(nc: int, nf: int) -> np.ndarray:

@@ -52,7 +52,7 @@ class MemorySource:
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
-        self.u, self.zeta, self.L, self.d = u, zeta, L, d
+        self.u, self.zeta, self.truncation, self.d = u, zeta, L, d
         self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
         self.keep = keep
         self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
@@ -154,8 +154,8 @@ class MemorySource:
             tr += eps[i]
         tr *= self.lame_lambda
         a[:d] += tr
-        if a.max() > self.L or a.min() < -self.L:  # the truncation acts (NaN: skipped, and kept, like clip's)
-            np.clip(a, -self.L, self.L, out=a)
+        if a.max() > self.truncation or a.min() < -self.truncation:  # the truncation acts (NaN: skipped, and kept, like clip's)
+            np.clip(a, -self.truncation, self.truncation, out=a)
         z = self.zeta_at_points()
         a *= z * scale if scale != 1.0 else z
         if out is None:
@@ -280,7 +280,7 @@ class OutOfPlaneSource:
         src = self.source
         h = eps[0] + eps[1]
         h *= src.lame_lambda
-        np.clip(h, -src.L, src.L, out=h)
+        np.clip(h, -src.truncation, src.truncation, out=h)
         z = src.zeta_at_points()
         h *= z * scale if scale != 1.0 else z
         if base is not None:

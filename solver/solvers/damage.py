@@ -74,12 +74,12 @@ class Damage:
         self.k = k
         a, rhs = self._forms(z, xi, phi, k_, dx)
         self.a = fem.form(a)
-        self.L = fem.form(rhs)
+        self.rhs_form = fem.form(rhs)
         self.A = fpetsc.assemble_matrix(self.a)
         self.A.assemble()
         if self.symmetric:
             self.A.setOption(PETSc.Mat.Option.SPD, True)
-        self.b = fpetsc.create_vector(self.L)
+        self.b = fpetsc.create_vector(self.rhs_form)
         self.x = self.b.duplicate()
         self.ksp = make_ksp(V.mesh.comm, self.A, "damage_", solve.petsc_options, solve.linear,
                             symmetric=self.symmetric, rtol=solve.rtol)
@@ -108,7 +108,7 @@ class Damage:
         """b = (L, xi) at the current u and zeta (levels n-1)."""
         with self.b.localForm() as b:
             b.set(0.0)
-        fpetsc.assemble_vector(self.b, self.L)
+        fpetsc.assemble_vector(self.b, self.rhs_form)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
     def step(self) -> DamageStepInfo:
@@ -200,16 +200,16 @@ class CNAB2Damage(Damage):
         self.s = self.b.duplicate()  # (phi_{n-1}, xi)
         self.s_prev = self.b.duplicate()  # (phi_{n-2}, xi)
         self.have_prev = False
-        self._Bz = self.b.duplicate()
+        self._explicit_zeta = self.b.duplicate()
         self._zeta0: PETSc.Vec | None = None  # zeta_0 during the first step (_keep_zeta0), for its corrector
 
     def _forms(self, z, xi, phi, k_, dx) -> tuple[ufl.Form, ufl.Form]:
-        """A = M + k kappa/2 K and B = M - k kappa/2 K (assembled here); L = (phi, xi), assembled each step."""
+        """A = M + k kappa/2 K and ``explicit_half`` = M - k kappa/2 K (assembled here); the source (phi, xi), assembled each step."""
         half = 0.5 * k_ * self.cfg.kappa
         a = (z * xi + half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
-        rhs = phi * xi * dx  # the source; the rest is the matrix B zeta_{n-1}
-        self.B = fpetsc.assemble_matrix(fem.form((z * xi - half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx))
-        self.B.assemble()
+        rhs = phi * xi * dx  # the source; the rest is explicit_half zeta_{n-1}
+        self.explicit_half = fpetsc.assemble_matrix(fem.form((z * xi - half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx))
+        self.explicit_half.assemble()
         return a, rhs
 
     def state(self) -> dict[str, np.ndarray]:
@@ -229,11 +229,11 @@ class CNAB2Damage(Damage):
         """b = B zeta_{n-1} + k (3/2 s_{n-1} - 1/2 s_{n-2}), with s = (phi, xi) just assembled into b."""
         super().assemble_rhs()
         self.b.copy(self.s)
-        self.B.mult(self.zeta.vector, self._Bz)
+        self.explicit_half.mult(self.zeta.vector, self._explicit_zeta)
         self.b.scale(1.5 * self.k if self.have_prev else self.k)
         if self.have_prev:
             self.b.axpy(-0.5 * self.k, self.s_prev)
-        self.b.axpy(1.0, self._Bz)
+        self.b.axpy(1.0, self._explicit_zeta)
 
     def step(self) -> DamageStepInfo:
         if not self.have_prev:
@@ -256,9 +256,9 @@ class CNAB2Damage(Damage):
             raise RuntimeError("correct_first_step follows the first step only")
         with self.s.localForm() as s:
             s.set(0.0)
-        fpetsc.assemble_vector(self.s, self.L)  # phi at (u_1 predicted, zeta_1 predicted)
+        fpetsc.assemble_vector(self.s, self.rhs_form)  # phi at (u_1 predicted, zeta_1 predicted)
         self.s.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.B.mult(self._zeta0, self.b)
+        self.explicit_half.mult(self._zeta0, self.b)
         self.b.axpy(0.5 * self.k, self.s)
         self.b.axpy(0.5 * self.k, self.s_prev)  # s_prev holds phi_0 (and keeps it for the next step's AB2)
         self._solve()
