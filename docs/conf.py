@@ -27,8 +27,6 @@ source_suffix = {".md": "markdown"}
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
 html_theme = "furo"
 html_title = f"campo-solver {release}"
-# links to files of the repository (solver/..., configs/..., benchmarks/...) are not pages of the site
-suppress_warnings = ["myst.xref_missing"]
 
 
 def _generate(app) -> None:
@@ -44,7 +42,7 @@ def _generate(app) -> None:
     out = DOCS / "demos"
     out.mkdir(exist_ok=True)
     for script in sorted((ROOT / "demos").glob("*.py")):
-        text = jupytext.writes(jupytext.read(script), fmt="md:myst")
+        text = jupytext.writes(jupytext.read(script), fmt="md")
         target = out / (script.stem + ".md")
         if not target.exists() or target.read_text() != text:
             target.write_text(text)
