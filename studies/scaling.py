@@ -11,7 +11,7 @@ prediction. The cases are merged into ``bench.json`` under ``"scaling"`` (the re
 solver, ranks and n, so the command can be run in pieces and resumed: cases already there are not run again
 (``--redo`` runs them again). Then the fits ``time per step = a N^b / R^c`` (N dofs, R ranks) and the memory per
 dof, the table ``scaling.md``, the chart ``scaling.png`` and, when the output directory is the repository's
-``benchmarks/results``, the generated part of the README's "Running on a cluster" section.
+``benchmarks/results``, the generated part of docs/benchmarks/scaling.md.
 """
 
 from __future__ import annotations
@@ -453,7 +453,7 @@ def main(argv: list[str] | None = None) -> int:
     scaling = {"cases": dict(old.get("cases", {})), "machine": os.uname().nodename, "cores": os.cpu_count(),
                "date": time.strftime("%Y-%m-%d %H:%M"), "k": K, "scene": str(SCENE.relative_to(ROOT))}
     cases = scaling["cases"]
-    readme = None if a.no_readme or out.resolve() != RESULTS.resolve() else ROOT / "README.md"
+    readme = None if a.no_readme or out.resolve() != RESULTS.resolve() else ROOT / "docs" / "benchmarks" / "scaling.md"
     timeout = a.timeout_s or max(3 * a.budget_s, 300.0)
     if a.report_only:
         scaling.update({k: old[k] for k in ("machine", "cores", "date") if k in old})  # when it was measured

@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 SCRIPT = Path(__file__).with_name("paraview_script.py")
-NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get install paraview)"
+NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get install paraview python3-paraview xvfb)"
 # variables of the caller's MPI launch or Python that must not leak into ParaView's own MPI and Python
 _DROP_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "MPICH_", "HYDRA_", "I_MPI_")
 _DROP = ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")

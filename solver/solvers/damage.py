@@ -53,7 +53,7 @@ class DamageLinearSolve:
 
 
 class Damage:
-    """Base: owns zeta (P1), the matrix A, the right-hand side b, their solve and the clip.
+    """Base: owns zeta (P1 or P2: discretization.zeta_degree), the matrix A, the right-hand side b, their solve and the clip.
 
     A subclass gives its forms (:meth:`_forms`) and, where they differ from the explicit step's,
     how b is assembled and what a step does; checkpoint state only where it has some.

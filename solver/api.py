@@ -1,0 +1,175 @@
+"""The Python interface: load or build a scene, change it, run it, get arrays back.
+
+The same scenes, checks and results as ``python -m solver run``, without strings::
+
+    from solver import api
+    cfg = api.load("configs/example1.toml").replace({"time": {"k": 0.02}})
+    res = api.run(cfg)                        # in memory; api.run(cfg, "results/x") also writes the files
+    res.series["contact_force"]               # one numpy array per timeseries.csv column, one entry a level
+    res.fields["damage"]                      # the final level's fields at the mesh nodes (input order)
+
+A change that a scene file would refuse raises the same one-line :class:`solver.errors.ConfigError`.
+Every rank of a communicator calls :func:`run` with the same scene; every rank gets the same
+series and the same (gathered) fields.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from solver.config import Config, from_dict, load
+from solver.errors import UsageError
+
+__all__ = ["Config", "Results", "load", "read", "run", "scene"]
+
+# what a results directory holds (cli.RESULT_FILES): replaced by run(..., overwrite=True)
+_RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
+                 "mesh.h5")
+
+
+@dataclass
+class Results:
+    """A run's time series and final fields.
+
+    ``series``: one array per column of ``timeseries.csv`` (``step``, ``t``, ``contact_force``, ``zeta_min``, ...),
+    one entry a level. ``fields``: the last written level's node fields (``displacement`` as (nodes, dim),
+    ``damage`` as (nodes,)) at ``points`` in the mesh's input order, the same on every rank.
+    ``directory``: where the files went (None: in memory). ``model``: the live dolfinx objects of an in-memory
+    run (``model.u``, ``model.zeta``), for post-processing with dolfinx/UFL; None when read from files.
+    """
+
+    series: dict[str, np.ndarray]
+    fields: dict[str, np.ndarray]
+    points: np.ndarray
+    directory: Path | None = None
+    model: Any = field(default=None, repr=False)
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The time series' column names, in the CSV's order."""
+        return tuple(self.series)
+
+    def table(self, *columns: str) -> np.ndarray:
+        """The chosen columns (default: all) as one 2-D array, a row a level: a table without pandas."""
+        names = columns or self.columns
+        return np.column_stack([self.series[c] for c in names])
+
+
+def scene(data: dict | None = None, source: str = "<python>", base: str | Path | None = None) -> Config:
+    """A scene built in Python from a TOML-shaped dict (``{}``: the paper's Example 1), validated as a file is.
+
+    ``base``: the directory relative paths (``mesh.file``) are read from (default: the current one).
+    """
+    return from_dict({} if data is None else data, source=source, base=Path(base).resolve() if base else None)
+
+
+def run(cfg: Config, output: str | Path | None = None, overwrite: bool = False, comm: Any = None,
+        on_step: Any = None) -> Results:
+    """Run ``cfg``; with ``output``, write the results directory as ``solver run --output`` does.
+
+    ``overwrite``: replace earlier results in ``output`` (else a UsageError, as the CLI refuses).
+    ``on_step(row)``: called after each level (a progress bar). ``comm``: default MPI.COMM_WORLD.
+    A scene with ``accuracy.tolerance`` is refused: the planner runs from the CLI (``--tolerance``).
+    """
+    from mpi4py import MPI
+
+    from solver.io.results import run as run_model
+    from solver.run.model import build_model
+
+    comm = MPI.COMM_WORLD if comm is None else comm
+    if cfg.accuracy.enabled:
+        raise UsageError("api.run: accuracy.tolerance is set; run tolerance scenes with `solver run --tolerance` "
+                         "(the Python interface runs a scene as given)")
+    outdir = None if output is None else Path(output)
+    model = build_model(cfg, comm)
+    if outdir is not None:
+        _prepare(comm, outdir, overwrite)
+    rows = run_model(model, outdir, on_step=on_step)
+    series = {c: np.array([r[c] for r in rows], dtype=float) for c in _columns(model)}
+    points, fields = final_fields(model)
+    return Results(series, fields, points, outdir, model)
+
+
+def _columns(model: Any) -> tuple[str, ...]:
+    """The columns timeseries.csv has for this model, in its order (solver.io.results.run)."""
+    from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS
+
+    return CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+
+
+def read(directory: str | Path) -> Results:
+    """The results a run wrote to ``directory`` (timeseries.csv and the last level of solution.xdmf)."""
+    from solver.post.results import read_csv
+    from solver.post.results import read_results as read_dir
+
+    directory = Path(directory)
+    rows = read_csv(directory / "timeseries.csv")
+    series = {c: np.array([r[c] for r in rows]) for c in rows[0]} if rows else {}
+    res = read_dir(directory)
+    last = res["times"][-1]
+    dim = res["geometry"].shape[1]  # the writer keeps the mesh's geometric dimension
+    fields = {}
+    for name, levels in res["fields"].items():
+        if last in levels:
+            v = levels[last]
+            fields[name] = v[:, :dim] if name == "displacement" else (v[:, 0] if v.ndim == 2 and v.shape[1] == 1 else v)
+    return Results(series, fields, res["geometry"][:, :dim], directory)
+
+
+def final_fields(model: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The model's displacement and damage at the mesh nodes (P1 values; higher degrees interpolated to P1, as the
+    writer does), gathered in input order on every rank: (points, {name: values})."""
+    from solver.io.xdmf import DolfinxRows, dolfinx_layout
+
+    mesh = model.geo.mesh
+    layout, rows = dolfinx_layout(mesh), DolfinxRows(mesh)
+    comm = mesh.comm
+    keys = np.concatenate(comm.allgather(layout.node_keys))
+    order = np.argsort(keys, kind="stable")
+    gathered = lambda a: np.concatenate(comm.allgather(np.ascontiguousarray(a)))[order]  # noqa: E731
+    out = {"displacement": gathered(rows.rows(_p1(model.u)))}
+    if model.damage is not None:
+        out["damage"] = gathered(rows.rows(_p1(model.damage.zeta)))[:, 0]
+    return gathered(layout.points), out
+
+
+def _p1(f: Any) -> Any:
+    """``f`` if it is P1, else its interpolant in P1 (the values the XDMF writer writes)."""
+    from dolfinx import fem
+
+    el = f.function_space.ufl_element()
+    if el.degree() == 1:
+        return f
+    mesh = f.function_space.mesh
+    V1 = (fem.VectorFunctionSpace(mesh, ("CG", 1), dim=el.value_shape()[0]) if el.value_shape()
+          else fem.FunctionSpace(mesh, ("CG", 1)))
+    out = fem.Function(V1)
+    out.interpolate(f)
+    return out
+
+
+def _prepare(comm: Any, outdir: Path, overwrite: bool) -> None:
+    """Make ``outdir`` (rank 0); refuse earlier results unless ``overwrite`` (UsageError on every rank)."""
+    problem = None
+    if comm.rank == 0:
+        existing = [f for f in _RESULT_FILES if (outdir / f).exists()]
+        if outdir.exists() and not outdir.is_dir():
+            problem = f"output {outdir}: exists and is not a directory"
+        elif existing and not overwrite:
+            problem = f"output {outdir}: holds earlier results ({', '.join(existing)}); pass overwrite=True to replace them"
+        else:
+            for f in existing:
+                target = outdir / f
+                shutil.rmtree(target) if target.is_dir() else target.unlink()
+            try:
+                outdir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                problem = f"output {outdir}: cannot write there ({exc.strerror or exc})"
+    problem = comm.bcast(problem, root=0)
+    if problem:
+        raise UsageError(problem)
