@@ -75,7 +75,7 @@ KINDS = {"Scalar": 1, "Vector": 3, "Tensor6": 6}  # components in the file
 CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 MAX_LEVELS_PER_CHUNK = 100
-CHUNK_BYTES = 256 * 2**20
+CHUNK_BYTES = 64 * 2**20  # an open chunk is held in memory on rank 0
 SETTLE_CHUNKS = True  # fdatasync each closed chunk and drop its pages, in a thread (see _Settler)
 
 _HEAD = ('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n  <Domain>\n'
@@ -254,14 +254,27 @@ def _write_dataset(group, name: str, data: np.ndarray, tid, dcpl) -> None:
 
 
 def _write_file(path: Path, data: bytes) -> None:
-    """Write ``data`` as the whole of a new file ``path``."""
-    with open(path, "wb") as fh:
-        fh.write(data)
+    """Write ``data`` as the whole of a new file ``path`` (a failure names the file)."""
+    try:
+        with open(path, "wb") as fh:
+            fh.write(data)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
 
 
 def _close_chunk(chunk: _Chunk) -> None:
-    """Close a chunk's HDF5 file: its levels complete, its metadata written."""
+    """Close a chunk's in-memory HDF5 file and write its image to the chunk's path, complete."""
+    chunk.h5.flush()
+    image = chunk.h5.id.get_file_image()
     chunk.h5.close()
+    _write_file(chunk.path, image)
+
+
+def _remove(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
@@ -270,12 +283,17 @@ def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
         _write_file(tmp, data)
         os.replace(tmp, path)
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _remove(tmp)
         raise
 
 
 class _Chunk:
-    """A chunk file being filled (rank 0): an HDF5 file open for writing that no listed level refers to."""
+    """A chunk being filled (rank 0): an HDF5 file in memory (h5py's core driver), written to ``path`` when closed.
+
+    Kept in memory, an open chunk never leaves a half-written HDF5 file behind it: a full disk fails the one
+    plain write of its image, which leaves HDF5 in no failed state (an HDF5 file on disk whose writes failed
+    cannot be closed, and made the process crash at exit). It costs up to ``CHUNK_BYTES`` of memory on rank 0.
+    """
 
     def __init__(self, path: Path, first: int, slots: int, dtype: np.dtype) -> None:
         import h5py
@@ -283,7 +301,7 @@ class _Chunk:
         self.path, self.first, self.slots = path, first, slots
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
-        self.h5 = h5py.File(path, "w")
+        self.h5 = h5py.File(str(path), "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
         self.h5.attrs["about"] = f"solver.xdmf chunk: group NNNN holds level {first} + NNNN of the series"
         self.dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
         self.dcpl.set_obj_track_times(False)  # the same bytes from the same values
@@ -471,7 +489,7 @@ class XDMFSeries:
             self.grids.append("      " + ET.tostring(g, encoding="unicode"))
             self.times.append(float(g.find("Time").get("Value")))
             referenced |= {item.text.strip().split(":", 1)[0] for item in g.iter("DataItem")}
-        self._write_xml()
+        self._write_xml(self.grids)
         for chunk in self.data_dir.glob("levels_*.h5"):  # a new chunk is named after len(kept): no clash
             if f"fields/{chunk.name}" not in referenced:
                 chunk.unlink()
@@ -502,8 +520,12 @@ class XDMFSeries:
         """List every level written so far: close the open chunk and replace the XML (collective).
 
         The stepper calls it before a checkpoint, so that a checkpoint never runs ahead of the listed series."""
+        def flush() -> None:
+            self._raise_error()
+            self._list_open_chunk()
+
         if not self.closed:
-            self._collective(self._list_open_chunk)
+            self._collective(flush)
 
     def _global(self, recv: np.ndarray):
         """Rank 0: each field's values in file order (one gather through an index computed once)."""
@@ -528,20 +550,15 @@ class XDMFSeries:
                 first = len(self.grids)
                 self.chunk = _Chunk(self.data_dir / f"levels_{first:06d}.h5", first, self._chunk_slots(), self.dtype)
             self.chunk.add(t, fields, self._grid_format)
-            if self.chunk.full:
-                self._list_open_chunk()
         except Exception as exc:
-            self._fail(exc, t)
+            try:
+                self._list_open_chunk()  # its complete levels, if they can still be written
+            except SeriesError:
+                pass
+            self.error = (self._describe(exc), t)  # the first failure is the one reported
             raise SeriesError(*self.error) from None
-
-    def _fail(self, exc: Exception, t: float) -> None:
-        """Rank 0, after a failed write of level t: keep the error, list the open chunk's complete levels if its
-        file can still be closed (else it stays unlisted), take no more levels."""
-        self.error = (self._describe(exc), t)
-        try:
+        if self.chunk.full:
             self._list_open_chunk()
-        except Exception:  # noqa: BLE001  (the disk is full: the first failure is the one reported)
-            self.chunk = None
 
     def _raise_error(self) -> None:
         self._raise_settled()
@@ -558,28 +575,32 @@ class XDMFSeries:
         return max(1, min(MAX_LEVELS_PER_CHUNK, CHUNK_BYTES // max(1, level_bytes)))
 
     def _list_open_chunk(self) -> None:
-        """Rank 0: close the open chunk, then list its levels (the XML replaced), then settle it in the background."""
+        """Rank 0: write the open chunk's file, then list its levels (the XML replaced), then settle it in the
+        background. A failure (the chunk file removed, the series takes no more levels) is a SeriesError with
+        the time of the chunk's last level."""
         chunk, self.chunk = self.chunk, None
-        if chunk is None:
+        if chunk is None or not chunk.grids:
             return
-        _close_chunk(chunk)
-        if not chunk.grids:
-            chunk.path.unlink()
-            return
+        try:
+            _close_chunk(chunk)
+            self._write_xml(self.grids + chunk.grids)
+        except Exception as exc:
+            self.error = (self._describe(exc), chunk.times[-1])
+            _remove(chunk.path)  # not listed: the space back for what follows (the checkpoint, the CSV)
+            raise SeriesError(*self.error) from None
         self.grids += chunk.grids
         self.times += chunk.times
-        self._write_xml()
         if SETTLE_CHUNKS and not self.closed:
             if self._settler is None:
                 self._settler = _Settler()
             self._settler.submit(chunk.path)
 
-    def _write_xml(self) -> None:
-        """Replace ``solution.xdmf`` by the list of every listed level (none: no file)."""
-        if not self.grids:
+    def _write_xml(self, grids: list[str]) -> None:
+        """Replace ``solution.xdmf`` by the list of ``grids`` (none: no file)."""
+        if not grids:
             self.path.unlink(missing_ok=True)
             return
-        text = _HEAD.format(name=self.name) + "".join(self.grids) + _TAIL
+        text = _HEAD.format(name=self.name) + "".join(grids) + _TAIL
         _replace_file(self.path, self.tmp, text.encode())
 
 

@@ -7,9 +7,10 @@ installs SPEC, then runs the module or script as ``python`` would.
 SPEC is ``action:stage:k``. ``action``: ``kill`` (SIGKILL this process) or ``enospc`` (raise OSError ENOSPC, as a
 full disk does). ``stage``, counted per process from 1:
 
-- ``data``: the k-th written level, after its first field is written (the chunk file is open, the level half done);
-- ``close``: the k-th chunk, just after its file was closed (complete, not yet listed in the XML);
-- ``xml``: the k-th XML written, with half of the temporary file written (not yet renamed over solution.xdmf).
+- ``data``: the k-th written level, after its first field is written (its chunk open, the level half done);
+- ``close``: the k-th chunk, just after its file was written (complete, not yet listed in the XML);
+- ``file``: the k-th file written, half of it: chunk files and XML temporaries alternate (chunk 1, the XML
+  listing it, chunk 2, ...); a chunk file is not yet listed, a temporary not yet renamed over solution.xdmf.
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ def install(spec: str) -> None:
     import solver.xdmf as sx
 
     action, stage, k = spec.split(":")
-    if action not in ("kill", "enospc") or stage not in ("data", "close", "xml"):
-        raise ValueError(f"fault {spec!r}: action kill|enospc, stage data|close|xml")
+    if action not in ("kill", "enospc") or stage not in ("data", "close", "file"):
+        raise ValueError(f"fault {spec!r}: action kill|enospc, stage data|close|file")
     at, count = int(k), {"n": 0}
 
     def hit() -> bool:

@@ -196,11 +196,13 @@ def test_chunks_keep_their_size_and_the_xml_is_replaced_once_per_chunk(tmp_path,
 
 
 @pytest.mark.serial
-@pytest.mark.parametrize("stage,at,listed", [("data", 6, 5), ("data", 3, 2), ("close", 2, 3), ("xml", 2, 3)])
+@pytest.mark.parametrize("stage,at,listed", [("data", 6, 5), ("data", 3, 2), ("close", 2, 3), ("file", 3, 3),
+                                             ("file", 4, 3)])
 def test_full_disk_is_one_line_with_the_level_and_keeps_what_is_complete(tmp_path, monkeypatch, stage, at, listed):
-    """ENOSPC inside a level's data (after its first field), a chunk's close or the XML's rewrite: SeriesError with
-    one line and the failed level's t; the complete levels are listed (those of the open chunk too, when its file
-    can still be closed), the XML is never left half written, no more levels are taken, close() finishes quietly."""
+    """ENOSPC inside a level's data (after its first field), after a chunk's file is written, or half-way through
+    a chunk file (file 3) or the XML's temporary (file 4): SeriesError with one line and the failed level's t; the
+    complete levels are listed (those of the open chunk too, when its file can still be written), the XML is never
+    left half written, a chunk file not listed is removed, no more levels are taken, close() finishes quietly."""
     monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
     for name in ("_write_dataset", "_close_chunk", "_write_file"):
         monkeypatch.setattr(sx, name, getattr(sx, name))  # restored after the test: faults.install replaces them
@@ -212,7 +214,8 @@ def test_full_disk_is_one_line_with_the_level_and_keeps_what_is_complete(tmp_pat
     with pytest.raises(SeriesError) as failed:
         for t in times:
             w.write(t, scene.values(t))
-    failed_t = times[at - 1] if stage == "data" else times[3 * at - 1]  # close, xml: the level that filled the chunk
+    chunk = {"data": None, "close": at, "file": (at + 1) // 2}[stage]
+    failed_t = times[at - 1] if chunk is None else times[3 * chunk - 1]  # the level that filled the chunk
     assert failed.value.t == failed_t and "\n" not in str(failed.value)
     assert str(failed.value).startswith("No space left on device"), str(failed.value)
     with pytest.raises(SeriesError, match="No space left on device"):
@@ -221,6 +224,8 @@ def test_full_disk_is_one_line_with_the_level_and_keeps_what_is_complete(tmp_pat
     check_values(read_series(tmp_path / "solution.xdmf"), times[:listed])
     check_values(meshio_read(tmp_path / "solution.xdmf"), times[:listed])
     assert not (tmp_path / ".solution.xdmf.tmp").exists()
+    referenced = {i.text.split(":")[0] for i in ET.parse(tmp_path / "solution.xdmf").getroot().iter("DataItem")}
+    assert {f"fields/{p.name}" for p in (tmp_path / "fields").iterdir()} == referenced
 
 
 def test_hdf5_errors_are_described_in_one_line():
@@ -237,7 +242,7 @@ def _crash(w: XDMFSeries) -> None:
     if w._settler is not None:
         w._settler.stop()
     if w.chunk is not None:
-        w.chunk.h5.close()  # the file stays as it is (unlisted); closing only releases HDF5's handle
+        w.chunk.h5.close()  # in memory: lost, as in a killed process
     w.closed = True
 
 
@@ -375,8 +380,9 @@ def _run(script: Path, args: list[str], nproc: int, env: dict, fault: str | None
 @pytest.mark.parametrize("stage,at,listed,nproc", [
     ("data", 6, 4, 1),  # inside the 6th level's data (chunk 4-7 open): levels 0-3 listed
     ("data", 3, 0, 1),  # inside the 3rd level's data: nothing listed yet, no solution.xdmf
-    ("close", 2, 4, 1),  # chunk 4-7 closed, not yet listed
-    ("xml", 2, 4, 1),  # the XML listing levels 0-7 half written to its temporary, not renamed
+    ("close", 2, 4, 1),  # chunk 4-7 written, not yet listed
+    ("file", 3, 4, 1),  # chunk 4-7 half written
+    ("file", 4, 4, 1),  # the XML listing levels 0-7 half written to its temporary, not renamed
     ("data", 10, 8, 2),  # 2 ranks, rank 0 killed inside a data write
 ])
 def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc):
