@@ -5,10 +5,11 @@ Layout of a results directory (``name`` = ``solution``)::
     solution.xdmf              one temporal collection; each listed level is one <Grid> with every field
     fields/mesh.h5             /geometry, /topology: written once
     fields/levels_000000.h5    /0000/<field>, /0001/<field>, ...: levels 0, 1, ... of the series
-    fields/levels_000100.h5    /0000/<field> is level 100, ... (a chunk holds up to 100 levels, 256 MiB)
+    fields/levels_000100.h5    /0000/<field> is level 100, ... (a chunk holds up to 100 levels, 64 MiB)
 
 A chunk file is named after the index of its first level in the series and holds one group per
 level (``NNNN`` = index - first) with one dataset per field, ``(rows,)`` or ``(rows, components)``.
+A chunk may hold fewer levels: it is also closed at every checkpoint (see *Crash safety*).
 
 **Order.** Nodes and cells are written in the mesh's input order (``input_global_indices``,
 ``original_cell_index``), gathered to rank 0. The files therefore do not depend on the
@@ -19,40 +20,43 @@ number of ranks continues the same series on the same mesh file.
 level's data by a plain path (``fields/levels_000100.h5:/0003/damage``), which every XDMF
 reader understands; one resizable dataset per field would need ``HyperSlab`` items, which
 meshio's reader does not read. A file per level would make thousands of files, and meshio
-keeps each one open (past the usual limit of 1024 descriptors). A chunk file is written
-through h5py while it is open and is never opened for writing again once closed.
+keeps each one open (past the usual limit of 1024 descriptors).
 
 **Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
-levels of closed chunk files.
-- *Data.* Rank 0 keeps one chunk file open for writing; no listed level refers to it, so a
-  kill that leaves it unreadable damages nothing listed. It is closed (its levels complete
-  and its HDF5 metadata on disk) when it holds ``MAX_LEVELS_PER_CHUNK`` levels or
-  ``CHUNK_BYTES``, at every :meth:`XDMFSeries.flush` (the stepper's checkpoints) and at
-  :meth:`XDMFSeries.close`; only then are its levels listed. A closed chunk is only ever read.
+levels of chunk files that were written completely and will not be written again.
+- *Data.* The chunk being filled is an HDF5 file in memory (h5py's core driver) on rank 0.
+  It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
+  :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
+  :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
+  only after that are its levels listed. A kill before or during that write leaves at most
+  an unlisted file. No HDF5 file is ever open for writing on disk, and a listed file is only
+  ever read.
 - *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
   ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
-  atomic on POSIX). A reader, or the file left by a kill, is the old list or the new one.
-- *Restart.* A killed run leaves at most one unlisted chunk (partly written or not) and
-  perhaps the temporary XML; ``XDMFSeries(..., keep_until=t)`` removes both, keeps the listed
-  levels with time <= t, checks that ``fields/mesh.h5`` is this mesh and appends after them
-  in a new chunk file.
+  atomic on POSIX). A reader, or the file left by a kill, sees the old list or the new one.
+- *Restart.* ``XDMFSeries(..., keep_until=t)`` removes what a kill may leave (an unlisted
+  chunk file, the temporary XML), keeps the listed levels with time <= t, checks that
+  ``fields/mesh.h5`` is this mesh and appends after them in a new chunk file.
 The price: after a kill, the levels written since the last chunk was closed are not listed
-(up to 100 levels, or those since the last checkpoint). A restart recomputes them from the
-checkpoint anyway, because ``flush()`` lists every level before the checkpoint is written.
-Writes are not ``fsync``ed for safety: they survive the death of the process, not of the machine.
+(up to 100 levels, at most those since the last checkpoint); the old writer listed each level
+as it was written. A restart recomputes them from the checkpoint anyway, because ``flush()``
+lists every level before the checkpoint is written. Writes are not ``fsync``ed for safety:
+they survive the death of the process, not of the machine.
 
-**Cost.** A level costs one HDF5 group and one dataset per field in the open chunk (about
-70 us per field with h5py's low-level calls, measured at n = 32). The XML is rewritten once per
-closed chunk, so its cost per level is the file's size over the levels per chunk: O(listed
-levels / 100), about 1 ms per rewrite of 2,000 levels (2.4 MB). Levels are written on rank 0 in
-the calling thread: h5py holds the GIL while it writes, so a writer thread would not overlap
-with the solver. One thread settles each closed chunk (``fdatasync`` and drop its pages from
-the page cache, which release the GIL), so that the kernel does not write GBs of dirty pages
-back late in a long run, where it slows the memory-bound solves (see ``SETTLE_CHUNKS``).
+**Cost.** A level costs one HDF5 group and one dataset per field in memory: about 60-75 us
+per field (h5py's low-level calls, n = 32, measured), the floor of one dataset per level and
+field. The XML is rewritten once per closed chunk, so its cost per level is the file's size
+over the levels per chunk: O(listed levels / 100), about 1 ms per rewrite of 2,000 levels
+(2.4 MB). Levels are written in the calling thread: h5py holds the GIL, so a writer thread
+would not run beside the solver (the old writer's thread paid because ``pwrite`` releases
+it). One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
+page cache; both release the GIL), so that the kernel does not write GBs of dirty pages back
+late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
 
 **Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
-line and the failed level's time ``t``; the complete levels of the open chunk are then listed
-if its file can still be closed, and the series takes no more levels.
+line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
+last level). The complete levels of the open chunk are listed if they can still be written,
+a chunk file that could not be listed is removed, and the series takes no more levels.
 
 This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout`.
 """
