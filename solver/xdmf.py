@@ -388,7 +388,7 @@ class XDMFSeries:
         self.data_dir = self.directory / "fields"
         self.grids: list[str] = []  # the XML of every listed level
         self.times: list[float] = []  # their times
-        self.chunk: _Chunk | None = None  # rank 0: the chunk file being filled
+        self.chunk: _Chunk | None = None  # rank 0: the chunk being filled (in memory)
         self.error: tuple[str, float | None] | None = None  # rank 0: a failed write; the series takes no more
         self.closed = False
         self._take: dict[str, np.ndarray] | None = None
@@ -583,7 +583,10 @@ class XDMFSeries:
         background. A failure (the chunk file removed, the series takes no more levels) is a SeriesError with
         the time of the chunk's last level."""
         chunk, self.chunk = self.chunk, None
-        if chunk is None or not chunk.grids:
+        if chunk is None:
+            return
+        if not chunk.grids:  # its first level failed: nothing to write
+            chunk.h5.close()
             return
         try:
             _close_chunk(chunk)
