@@ -265,7 +265,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
 
 
 def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:
-    """The failure at level n, or, for a write done in the background, at the level whose write failed."""
+    """The failure at level n, or, for a failed write that names its level (OutputError.level_t), at that level."""
     if isinstance(exc, OutputError) and exc.level_t is not None:
         return exc.at(round(exc.level_t / k), exc.level_t)
     return exc.at(n, t)
