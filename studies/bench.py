@@ -315,7 +315,7 @@ def _output_cases(results: dict, tmp: Path, nproc: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    if "--scaling" in argv:  # the 3-D scaling benchmark (solver/scaling.py), its own options
+    if "--scaling" in argv:  # the 3-D scaling benchmark (studies/scaling.py), its own options
         from studies.scaling import main as scaling_main
 
         return scaling_main([a for a in argv if a != "--scaling"])

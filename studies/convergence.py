@@ -202,7 +202,7 @@ class Reference:
         z_order = grid_order(Z.tabulate_dof_coordinates(), self.model.cfg.mesh.corners, n_ref)
         pz = np.empty(len(z_order), dtype=np.int64)
         pz[z_order] = np.arange(len(z_order))
-        self.pu, self.pz = pu, pz  # grid order -> dof (the variants of solver/table1_variants.py assemble more norms)
+        self.pu, self.pz = pu, pz  # grid order -> dof (the variants of studies/table1_variants.py assemble more norms)
         self.strain_gram = petsc_to_scipy(E)[pu][:, pu].tocsr()
         self.mass_zeta = petsc_to_scipy(Mz)[pz][:, pz].tocsr()
         self.slot = {round(t / k_ref): i for i, t in enumerate(self.times)}

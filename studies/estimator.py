@@ -1,4 +1,4 @@
-"""Calibration of the residual estimator (solver/estimator.py) on Example 1's t = 0 problem.
+"""Calibration of the residual estimator (solver/physics/estimator.py) on Example 1's t = 0 problem.
 
 The elastic contact problem at t = 0 is solved on uniform meshes with P1 and P2 and
 compared with a P2 solution on a much finer mesh of the same family (nested, so the

@@ -10,7 +10,7 @@ reference (same scene and mu; Newton, n_ref, k_ref). Writes stability.csv and on
 map per method.
 
 ``study table1-variants``: which measurement of the error reproduces the paper's Table 1
-(solver/table1_variants.py; writes table1_variants.md, .csv, .json).
+(studies/table1_variants.py; writes table1_variants.md, .csv, .json).
 
 ``study work-precision``: error against the reference versus wall time over (n, k) for
 each method and variant on Example 1, with the Pareto front. Writes work_precision.csv

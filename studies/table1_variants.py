@@ -460,7 +460,7 @@ def write(result: dict, out: Path, command: str, top: int = 10) -> dict:
     md = ["# Table 1: which measurement reproduces the paper's numbers (issue 17)", "",
           f"Produced by `{command}` in {result['seconds']:.0f} s. References: {refs}. "
           f"{len(any_row)} (n, k) entries per variant; each ratio is ours / paper.", "",
-          "What the choices mean (`solver/table1_variants.py`): *transfer* prolong = the coarse solution on the fine "
+          "What the choices mean (`studies/table1_variants.py`): *transfer* prolong = the coarse solution on the fine "
           "mesh (ours), restrict = the reference interpolated at the coarse nodes and the error measured on the coarse "
           "mesh; *level 0* whether t = 0 is in the maximum; *u norm* eps = ||eps(.)||_L2 (the paper's V norm), "
           "eps_voigt = shear strain counted once, eps_engineering = gamma_12 = 2 eps_12, h1_semi = ||grad .||, "

@@ -1,7 +1,7 @@
 """``study tolerance``: does a run with a tolerance reach it, and at what cost against the best uniform choice?
 
 For every scene (Examples 1-3, configs/hard.toml, Example 1 with a gap of 0.02 and with
-mu = 1e-3) and every tolerance, the tolerance run (solver/accuracy.py) is measured against a
+mu = 1e-3) and every tolerance, the tolerance run (solver/run/accuracy.py) is measured against a
 fine reference in the paper's norm (max over levels of ||eps(u - u_ref)|| + ||zeta - zeta_ref||),
 with :class:`reference.PointwiseError` (the adapted meshes do not nest in the reference's).
 The reference is itself a P2, second-order tolerance run at ``ref_tol``, with a step a few

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import faults
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -95,15 +96,16 @@ def mpi_env() -> dict:
     return dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
 
 
-def solver_cmd(args: list[str], nproc: int = 1) -> list[str]:
+def solver_cmd(args: list[str], nproc: int = 1, fault: str | None = None) -> list[str]:
     """``python -m solver ARGS`` (``python -m studies ARGS`` for a study or benchmark), under
-    ``mpirun -n NPROC --oversubscribe`` when nproc > 1."""
+    ``mpirun -n NPROC --oversubscribe`` when nproc > 1; ``fault``: with that fault injected into the
+    XDMF writer (tests/faults.py)."""
     module = "studies" if args[:1] in (["bench"], ["study"], ["convergence"]) else "solver"
-    cmd = [sys.executable, "-m", module, *args]
+    cmd = [sys.executable, "-m", module, *args] if fault is None else faults.command(fault, ["-m", module, *args])
     return ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd] if nproc > 1 else cmd
 
 
-def run_cli(args: list[str], nproc: int = 1, timeout: float = 600) -> subprocess.CompletedProcess:
+def run_cli(args: list[str], nproc: int = 1, timeout: float = 600, fault: str | None = None) -> subprocess.CompletedProcess:
     """Run the command line as a user would (from the repository root), capturing its output."""
-    return subprocess.run(solver_cmd(args, nproc), cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
+    return subprocess.run(solver_cmd(args, nproc, fault), cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
                           timeout=timeout)

@@ -52,7 +52,7 @@ def test_check_and_no_overwrite(tmp_path):
 @pytest.mark.parametrize("nproc", [1, 2])
 def test_solver_failure_stops_cleanly(tmp_path, nproc):
     """Example 3 unloads at t = 0.55 (6 Newton iterations at k = 0.05); with max_it = 4 and no fallback that step
-    fails (the default damped fallback solves it: tests/test_damped_newton.py)."""
+    fails (the default damped fallback solves it: tests/solvers/test_damped_newton.py)."""
     out = tmp_path / "o"
     res = cli(["run", "configs/example3.toml", "--output", str(out), "--no-progress", "--set", "time.k=0.05",
                "--set", "solver.max_it=4", "--set", "solver.newton_fallback=false", "--set", "output.checkpoint_every=5",
@@ -119,17 +119,12 @@ def _stopped_by_full_disk(res, out, step: int | None = None) -> None:
 
 
 @pytest.mark.parametrize("nproc", [1, 2])
-@pytest.mark.parametrize("background", [False, True], ids=["at-once", "background"])
-def test_full_disk_injected_stops_like_a_failed_solve(tmp_path, monkeypatch, nproc, background):
-    """The data write of the 6th level (step 5) fails with ENOSPC half-way (test hook): exit 1, step and reason,
-    levels 0-4 intact and equal to a run that was not stopped. In the background the failure is found a few
-    levels later; the step reported is still the one whose write failed."""
+def test_full_disk_injected_stops_like_a_failed_solve(tmp_path, nproc):
+    """The data write of the 6th level (step 5) fails with ENOSPC half-way (tests/faults.py): exit 1, step and
+    reason, levels 0-4 listed (the open chunk's complete levels), intact and equal to a run that was not stopped."""
     out, ref = tmp_path / "o", tmp_path / "ref"
     assert cli([*FULL_DISK, "--set", "time.T=0.01", "--output", str(ref)], nproc).returncode == 0
-    if background:
-        monkeypatch.setenv("SOLVER_TEST_BACKGROUND", "1")
-    monkeypatch.setenv("SOLVER_TEST_ENOSPC", "data:6")
-    got = _stopped_by_full_disk(cli([*FULL_DISK, "--output", str(out)], nproc), out, step=5)
+    got = _stopped_by_full_disk(cli([*FULL_DISK, "--output", str(out)], nproc, fault="enospc:data:6"), out, step=5)
     assert len(got["times"]) == 5
     want = read_results(ref)
     for name, values in got["fields"].items():

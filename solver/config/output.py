@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from .fields import Ctx, boolean, check_keys, integer, names, need, string
 
-# the fields a run can write (solver/outputs.py says what each is)
+# the fields a run can write (solver/io/fields.py says what each is)
 FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz",
                "elastic_stress_zz")  # the last two: plane strain only (sigma_33), skipped elsewhere
 # what a ParaView user needs to warp the body and colour it as the paper does; the two tensors

@@ -21,7 +21,7 @@ class SolverConfig:
     damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees.
 
     ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
-    again by Newton with an exact line search on the level's energy (solver/damped_newton.py), with
+    again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
     up to newton.FALLBACK_IT_FACTOR * max_it iterations; false: such a level fails at ``max_it``.
 
     ``linear = "auto"`` is resolved on the mesh (linear.choose_linear): in 2-D PETSc's sequential Cholesky on one

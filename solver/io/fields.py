@@ -122,12 +122,11 @@ class CellStresses:
 class Outputs:
     """Owns the written fields and the XDMF series of a run (``outdir`` None: nothing is written).
 
-    ``expected_levels`` sizes the series' files; ``keep_until`` (a restart) keeps the levels
-    already written up to that time and appends after them.
+    ``keep_until`` (a restart) keeps the levels already written up to that time and appends after them.
     """
 
     def __init__(self, model, material: MaterialConfig, output: OutputConfig, outdir: Path | None,
-                 expected_levels: int | None = None, keep_until: float | None = None) -> None:
+                 keep_until: float | None = None) -> None:
         mesh = model.geo.mesh
         self.d = mesh.geometry.dim
         self.series = None
@@ -144,7 +143,7 @@ class Outputs:
         self.stresses = CellStresses(model, material) if set(self.names) - {"displacement", "damage"} else None
         specs = [FieldSpec(name, *KINDS[name]) for name in self.names]
         try:
-            self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, expected_levels, keep_until)
+            self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, keep_until)
         except SeriesError as exc:
             raise (UsageError(f"--restart: {exc}") if keep_until is not None else OutputError(str(exc))) from None
 
@@ -186,7 +185,7 @@ class Outputs:
             raise OutputError(str(exc), exc.t) from None
 
     def flush(self) -> None:
-        """Wait until every level is written (they are written in the background); raise a failed one's OutputError."""
+        """List every level written so far in the series (before a checkpoint); raise a failed write's OutputError."""
         if self.series is not None:
             try:
                 self.series.flush()

@@ -43,8 +43,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
             keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
     if outdir is not None:
         on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
-    written = sum(writes_level(n, steps, cfg.output.every) for n in range(start, steps + 1))
-    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, written, keep_until)
+    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
     columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
                + tuple(c for s in sensors for c in s.columns))
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
@@ -57,14 +56,14 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
             try:
                 t0 = time.perf_counter()
                 if writes_level(n, steps, cfg.output.every):
-                    out.write(row["t"])  # handed to the background writer (solver/io/xdmf.py)
+                    out.write(row["t"])
                 row["time_output"] = time.perf_counter() - t0
                 row["wall_time"] += row["time_output"]
                 rows.append(row)
                 if csv is not None:
                     on_rank0(comm, lambda row=row: csv.write(row))
                 if every_ckpt and n < steps and n % every_ckpt == 0:
-                    out.flush()  # a checkpoint never runs ahead of the written series
+                    out.flush()  # a checkpoint never runs ahead of the listed series
                     checkpoint.write(outdir, model, n, row["t"], part)
             except SolveFailure as exc:
                 raise _located(exc, n, row["t"], cfg.time.k) from None
@@ -83,7 +82,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
 
 
 def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:
-    """The failure at level n, or, for a write done in the background, at the level whose write failed."""
+    """The failure at level n, or, for a failed write that names its level (OutputError.level_t), at that level."""
     if isinstance(exc, OutputError) and exc.level_t is not None:
         return exc.at(round(exc.level_t / k), exc.level_t)
     return exc.at(n, t)

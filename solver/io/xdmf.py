@@ -1,69 +1,62 @@
-"""XDMF time series whose cost per written level does not grow with the run, and that a SIGKILL cannot damage.
+"""XDMF time series written with h5py, that a SIGKILL at any moment cannot damage.
 
 Layout of a results directory (``name`` = ``solution``)::
 
-    solution.xdmf              one temporal collection; each written level is one <Grid> with every field
+    solution.xdmf              one temporal collection; each listed level is one <Grid> with every field
     fields/mesh.h5             /geometry, /topology: written once
     fields/levels_000000.h5    /0000/<field>, /0001/<field>, ...: levels 0, 1, ... of the series
-    fields/levels_000100.h5    /0000/<field> is level 100, ... (a chunk holds up to 100 levels, 256 MiB)
+    fields/levels_000100.h5    /0000/<field> is level 100, ... (a chunk holds up to 100 levels, 64 MiB)
+
+A chunk file is named after the index of its first level in the series and holds one group per
+level (``NNNN`` = index - first) with one dataset per field, ``(rows,)`` or ``(rows, components)``.
+A chunk may hold fewer levels: it is also closed at every checkpoint (see *Crash safety*).
 
 **Order.** Nodes and cells are written in the mesh's input order (``input_global_indices``,
 ``original_cell_index``), gathered to rank 0. The files therefore do not depend on the
 partition: one process and ``mpirun -n N`` write the same rows, and a restart on another
 number of ranks continues the same series on the same mesh file.
 
-**Cost per level.** Rank 0 writes the level's values with one ``pwrite`` per field into
-space that HDF5 allocated when the chunk was created, then appends the level's ``<Grid>``
-to the XML. Nothing already written is read, parsed or rewritten. HDF5 itself makes one
-chunk per run (a template, about 35 us per dataset); every chunk file is a copy of the
-template's metadata bytes (a few us per level it holds).
+**Why a file per chunk of levels, a dataset per level and field.** The XML then names each
+level's data by a plain path (``fields/levels_000100.h5:/0003/damage``), which every XDMF
+reader understands; one resizable dataset per field would need ``HyperSlab`` items, which
+meshio's reader does not read. A file per level would make thousands of files, and meshio
+keeps each one open (past the usual limit of 1024 descriptors).
 
-**In the background.** Levels of ``BACKGROUND_BYTES`` or more are written by one thread on
-rank 0, in the order they were asked for, while the solver computes the next levels
-(``pwrite`` releases the GIL); smaller ones are written at once, since handing them over costs
-more than writing them.
-Once the kernel holds a few GB of unwritten pages it makes ``pwrite`` wait for the disk
-(measured: 0.1 ms per MB at first, 0.6 ms after 2 GB); the thread takes that wait off
-the time loop. At most ``QUEUE_LEVELS`` levels wait for it (then ``write`` waits: the
-memory stays bounded). A write that fails is reported by the next ``write``, ``flush``
-or ``close`` as a :class:`SeriesError` that carries the failed level's time ``t``; the
-levels after it are dropped, so the series still lists only complete levels, in order.
-``flush()`` waits for every level asked for (the stepper calls it before a checkpoint,
-so that a checkpoint never runs ahead of the written series).
+**Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
+levels of chunk files that were written completely and will not be written again.
+- *Data.* The chunk being filled is an HDF5 file in memory (h5py's core driver) on rank 0.
+  It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
+  :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
+  :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
+  only after that are its levels listed. A kill before or during that write leaves at most
+  an unlisted file. No HDF5 file is ever open for writing on disk, and a listed file is only
+  ever read.
+- *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
+  ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
+  atomic on POSIX). A reader, or the file left by a kill, sees the old list or the new one.
+- *Restart.* ``XDMFSeries(..., keep_until=t)`` removes what a kill may leave (an unlisted
+  chunk file, the temporary XML), keeps the listed levels with time <= t, checks that
+  ``fields/mesh.h5`` is this mesh and appends after them in a new chunk file.
+The price: after a kill, the levels written since the last chunk was closed are not listed
+(up to 100 levels, at most those since the last checkpoint); the old writer listed each level
+as it was written. A restart recomputes them from the checkpoint anyway, because ``flush()``
+lists every level before the checkpoint is written. Writes are not ``fsync``ed for safety:
+they survive the death of the process, not of the machine.
 
-**Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** A level becomes
-visible only after its data are in the file.
-- *Data.* A chunk's HDF5 metadata is complete, and the file closed, before any level is
-  written into it: every dataset is contiguous and allocated at creation
-  (``H5D_ALLOC_TIME_EARLY``, no fill). The data of a level are then raw ``pwrite`` calls
-  into that dataset's region, outside the HDF5 library, so a kill inside a write can only
-  leave a partly written region of the one level not yet listed. HDF5's own metadata is
-  never touched again (an HDF5 file that is open for writing can be left unreadable by a
-  kill: the failure mode of the earlier layout).
-- *XML.* ``solution.xdmf`` ends in a processing instruction padded with spaces
-  (``<?pad ...?>``), valid after the root element. A new grid is written into that padding
-  (where it is inert), then made live by changing one byte: the space in front of the
-  text ``!--`` before the closing tags becomes ``<``, which turns the old closing tags
-  into a comment that ends just before the new grid. Every state of the file, at every
-  byte, is valid XML listing only complete levels. When the padding runs out (it is sized
-  for the expected number of levels), the file is rewritten to a new name and renamed
-  (amortized O(1)); ``close()`` rewrites it once the same way without padding and markers.
-Writes are not ``fsync``ed: they survive the death of the process, not of the machine.
+**Cost.** A level costs one HDF5 group and one dataset per field in memory: about 60-75 us
+per field (h5py's low-level calls, n = 32, measured), the floor of one dataset per level and
+field. The XML is rewritten once per closed chunk, so its cost per level is the file's size
+over the levels per chunk: O(listed levels / 100), about 1 ms per rewrite of 2,000 levels
+(2.4 MB). Levels are written in the calling thread: h5py holds the GIL, so a writer thread
+would not run beside the solver (the old writer's thread paid because ``pwrite`` releases
+it). One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
+page cache; both release the GIL), so that the kernel does not write GBs of dirty pages back
+late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
 
-**Why not something simpler.** Appending datasets through an open HDF5 file (flushed after
-each level) leaves a window in which a kill corrupts the file's metadata, and with it levels
-already listed. HDF5's SWMR mode keeps the file consistent but cannot create datasets, and a
-killed writer leaves a flag that stops readers (``h5clear``). One HDF5 file per level is
-safe but makes thousands of files, and meshio's reader keeps each one open (past the usual
-limit of 1024 descriptors). Rewriting only the closing tags in one ``write`` is not atomic
-when the write spans two pages. Parallel HDF5 (``python3-h5py-mpi``) would add a package
-and still need the rows put into a partition-independent order; gathering to rank 0 costs
-less than the write itself here (measured by ``solver bench``: the files of 1 and 2 ranks
-agree to round-off, and the 2-rank write time per level is the serial one).
-
-**Restart.** ``XDMFSeries(..., keep_until=t)`` keeps the levels with time <= t, checks
-that ``fields/mesh.h5`` is this mesh, removes the data chunks no kept level refers to, and
-appends after the kept levels.
+**Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
+line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
+last level). The complete levels of the open chunk are listed if they can still be written,
+a chunk file that could not be listed is removed, and the series takes no more levels.
 
 This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout`.
 """
@@ -73,7 +66,6 @@ from __future__ import annotations
 import os
 import queue
 import re
-import signal
 import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -87,21 +79,12 @@ KINDS = {"Scalar": 1, "Vector": 3, "Tensor6": 6}  # components in the file
 CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 MAX_LEVELS_PER_CHUNK = 100
-QUEUE_LEVELS = 4  # levels that may wait for the background writer (rank 0)
-BACKGROUND_BYTES = 256 * 2**10  # levels of at least this size are written in the background (see _submit)
-BACKGROUND_ENV = "SOLVER_TEST_BACKGROUND"  # test hook: "1" writes every level in the background
-FLUSH_CHUNKS = True  # see _retire
-CHUNK_BYTES = 256 * 2**20
-KILL_ENV = "SOLVER_TEST_KILL"  # test hooks: "stage:k" SIGKILLs this process inside its k-th write of stage,
-ENOSPC_ENV = "SOLVER_TEST_ENOSPC"  # or fails it there with OSError ENOSPC, as a full disk does (see _Hook)
+CHUNK_BYTES = 64 * 2**20  # an open chunk is held in memory on rank 0
+SETTLE_CHUNKS = True  # fdatasync each closed chunk and drop its pages, in a thread (see _Settler)
 
 _HEAD = ('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n  <Domain>\n'
          '    <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">\n')
 _TAIL = "    </Grid>\n  </Domain>\n</Xdmf>\n"
-_MARK = " !--"  # text before the closing tags; its first byte becomes "<" to retire them
-_PAD_OPEN = "<?pad "
-_PAD_CLOSE = "?>\n"
-_REOPEN = " -->\n"  # first bytes of an appended unit: ends the comment that retires the old closing tags
 
 
 class SeriesError(RuntimeError):
@@ -112,42 +95,6 @@ class SeriesError(RuntimeError):
     def __init__(self, message: str, t: float | None = None) -> None:
         super().__init__(message)
         self.t = t
-
-
-class _Worker:
-    """One background thread that runs jobs in order; after a failure it drops the rest and keeps the error."""
-
-    def __init__(self) -> None:
-        self.jobs: queue.Queue = queue.Queue(maxsize=QUEUE_LEVELS)
-        self.error: BaseException | None = None
-        self.error_t: float | None = None
-        self.thread = threading.Thread(target=self._loop, name="xdmf-writer", daemon=True)
-        self.thread.start()
-
-    def _loop(self) -> None:
-        while True:
-            job = self.jobs.get()
-            try:
-                if job is None:
-                    return
-                if self.error is None:
-                    t, action = job
-                    try:
-                        action()
-                    except BaseException as exc:  # noqa: BLE001  (kept, and raised in the main thread)
-                        self.error, self.error_t = exc, t
-            finally:
-                self.jobs.task_done()
-
-    def submit(self, t: float, action) -> None:
-        self.jobs.put((t, action))
-
-    def wait(self) -> None:
-        self.jobs.join()
-
-    def stop(self) -> None:
-        self.jobs.put(None)
-        self.thread.join()
 
 
 @dataclass(frozen=True)
@@ -295,80 +242,124 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
     return out
 
 
-class _Hook:
-    """Test hook: ``SOLVER_TEST_KILL=stage:k`` SIGKILLs this process in the middle of its k-th write of
-    ``stage``; ``SOLVER_TEST_ENOSPC=stage:k`` raises OSError ENOSPC there instead.
+# ---------------------------------------------------------------------------- files
+# The three functions below are the only places that write series files; tests wrap them to
+# inject a kill or a full disk (tests/faults.py).
 
-    Stages: ``data`` (half of a level's first field written), ``xml`` (half of the grid written
-    into the padding), ``flip`` (grid written, not yet made live), ``chunk`` (a new chunk file
-    half copied). Counts are per writer, from 1.
+
+def _write_dataset(group, name: str, data: np.ndarray, tid, dcpl) -> None:
+    """One field of one level: a new dataset in ``group`` (h5py's low-level calls: half the cost of
+    ``Group.create_dataset``, measured)."""
+    import h5py
+
+    space = h5py.h5s.create_simple(data.shape)
+    ds = h5py.h5d.create(group, name.encode(), tid, space, dcpl=dcpl)
+    ds.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
+
+
+def _write_file(path: Path, data: bytes) -> None:
+    """Write ``data`` as the whole of a new file ``path`` (a failure names the file)."""
+    try:
+        with open(path, "wb") as fh:
+            fh.write(data)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
+def _close_chunk(chunk: _Chunk) -> None:
+    """Close a chunk's in-memory HDF5 file and write its image to the chunk's path, complete."""
+    chunk.h5.flush()
+    image = chunk.h5.id.get_file_image()
+    chunk.h5.close()
+    _write_file(chunk.path, image)
+
+
+def _remove(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
+def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
+    """Make ``data`` the content of ``path`` atomically: written to ``tmp`` (same directory), then renamed."""
+    try:
+        _write_file(tmp, data)
+        os.replace(tmp, path)
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
+class _Chunk:
+    """A chunk being filled (rank 0): an HDF5 file in memory (h5py's core driver), written to ``path`` when closed.
+
+    Kept in memory, an open chunk never leaves a half-written HDF5 file behind it: a full disk fails the one
+    plain write of its image, which leaves HDF5 in no failed state (an HDF5 file on disk whose writes failed
+    cannot be closed, and made the process crash at exit). It costs up to ``CHUNK_BYTES`` of memory on rank 0.
+    """
+
+    def __init__(self, path: Path, first: int, slots: int, dtype: np.dtype) -> None:
+        import h5py
+
+        self.path, self.first, self.slots = path, first, slots
+        self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
+        self.times: list[float] = []
+        self.h5 = h5py.File(str(path), "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
+        self.h5.attrs["about"] = f"solver.xdmf chunk: group NNNN holds level {first} + NNNN of the series"
+        self.dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        self.dcpl.set_obj_track_times(False)  # the same bytes from the same values
+        self.tid = h5py.h5t.py_create(dtype)
+
+    @property
+    def full(self) -> bool:
+        return len(self.grids) >= self.slots
+
+    def add(self, t: float, fields: list[tuple[str, np.ndarray]], grid_format: str) -> None:
+        """Write one level's fields into group ``NNNN``; its grid is kept once every field is written."""
+        import h5py
+
+        slot = f"{len(self.grids):04d}"
+        group = h5py.h5g.create(self.h5.id, slot.encode())
+        for name, data in fields:
+            _write_dataset(group, name, data, self.tid, self.dcpl)
+        self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=slot))
+        self.times.append(t)
+
+
+class _Settler:
+    """A thread that settles closed chunks: ``fdatasync``, then their pages dropped from the page cache.
+
+    Without it the kernel keeps GBs of written pages dirty and writes them back late in a long
+    run, where its work slows the solver's memory-bound solves (measured with the earlier
+    writer: n = 128, 2,000 levels, the displacement solve 4.7 -> 6.6 ms per step by the end).
+    Both calls release the GIL. Not needed for crash safety; a failure is kept and reported.
     """
 
     def __init__(self) -> None:
-        spec = os.environ.get(KILL_ENV, "")
-        self.enospc = not spec
-        spec = spec or os.environ.get(ENOSPC_ENV, "")
-        self.stage, _, k = spec.partition(":")
-        self.at = int(k) if k.isdigit() else 0
-        self.counts: dict[str, int] = {}
+        self.paths: queue.Queue = queue.Queue()
+        self.error: OSError | None = None
+        self.thread = threading.Thread(target=self._loop, name="xdmf-settler", daemon=True)
+        self.thread.start()
 
-    def armed(self, stage: str) -> bool:
-        if stage != self.stage:
-            return False
-        self.counts[stage] = self.counts.get(stage, 0) + 1
-        return self.counts[stage] == self.at
+    def _loop(self) -> None:
+        while (path := self.paths.get()) is not None:
+            try:
+                fd = os.open(path, os.O_RDONLY)
+                try:
+                    os.fdatasync(fd)
+                    os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+                finally:
+                    os.close(fd)
+            except OSError as exc:
+                self.error = self.error or exc
 
-    def kill(self) -> None:
-        if self.enospc:
-            raise OSError(28, "No space left on device (test hook)", None)
-        os.kill(os.getpid(), signal.SIGKILL)
+    def submit(self, path: Path) -> None:
+        self.paths.put(path)
 
-
-def _pwrite_all(fd: int, data, offset: int) -> None:
-    """``pwrite`` all of ``data`` (a short write is retried; a full disk raises OSError ENOSPC)."""
-    view = memoryview(data).cast("B")
-    while len(view):
-        n = os.pwrite(fd, view, offset)
-        if n <= 0:
-            raise OSError(28, "No space left on device (short write)")
-        view, offset = view[n:], offset + n
-
-
-def _retire(fd: int) -> None:
-    """Close a full chunk after its pages are on disk and out of the page cache (background writer).
-
-    Otherwise the kernel keeps GBs of written pages dirty and writes them back late in a long
-    run, where its work slows the solver's memory-bound solves (measured: n = 128, 2,000
-    levels, the displacement solve 4.7 -> 6.6 ms per step by the end). Flushing each chunk as
-    it fills spreads that work evenly over the run.
-    """
-    try:
-        if FLUSH_CHUNKS:
-            os.fdatasync(fd)
-            os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
-    finally:
-        os.close(fd)
-
-
-def _fmt_time(t: float) -> str:
-    return repr(float(t))
-
-
-@dataclass
-class _Template:
-    slots: int
-    size: int  # bytes of the file
-    meta: list[tuple[int, bytes]]  # (offset, bytes) of everything that is not a dataset's data
-    offsets: list[dict[str, int]]  # per slot: field -> byte offset of its data
-
-
-@dataclass
-class _Chunk:
-    first: int  # series index of its first slot
-    slots: int
-    path: Path
-    fd: int
-    offsets: list[dict[str, int]]  # per slot: field -> byte offset of its data
+    def stop(self) -> None:
+        self.paths.put(None)
+        self.thread.join()
 
 
 class XDMFSeries:
@@ -379,7 +370,7 @@ class XDMFSeries:
     """
 
     def __init__(self, directory: str | Path, layout: Layout, fields: Sequence[FieldSpec], precision: str = "double",
-                 expected_levels: int | None = None, keep_until: float | None = None, name: str = "solution") -> None:
+                 keep_until: float | None = None, name: str = "solution") -> None:
         if precision not in PRECISIONS:
             raise ValueError(f"precision {precision!r}: one of {', '.join(PRECISIONS)}")
         names = [f.name for f in fields]
@@ -395,27 +386,16 @@ class XDMFSeries:
         self.path = self.directory / f"{name}.xdmf"
         self.tmp = self.directory / f".{name}.xdmf.tmp"  # not *.xdmf: no second file a user could open
         self.data_dir = self.directory / "fields"
-        self.hook = _Hook()
         self.grids: list[str] = []  # the XML of every listed level
-        self.times: list[float] = []
-        self.chunk: _Chunk | None = None
-        self.fd: int | None = None  # solution.xdmf in padded form, open for pwrite
-        self.flip = self.cursor = self.pad_end = 0
+        self.times: list[float] = []  # their times
+        self.chunk: _Chunk | None = None  # rank 0: the chunk being filled (in memory)
+        self.error: tuple[str, float | None] | None = None  # rank 0: a failed write; the series takes no more
         self.closed = False
-        self.expected_new = expected_levels
-        self.base = 0  # levels kept from an earlier run
         self._take: dict[str, np.ndarray] | None = None
-        self._worker: _Worker | None = None  # rank 0: the background writer, started by the first write
-        self._templates: dict[int, _Template] = {}
+        self._settler: _Settler | None = None
         self._setup_gather()
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
-        self._collective(self._prepare_templates)
-
-    @property
-    def target(self) -> int | None:
-        """Levels the series will hold once this writer has appended the expected ones (None: not known)."""
-        return None if self.expected_new is None else self.base + self.expected_new
 
     # ------------------------------------------------------------------ set-up
 
@@ -446,6 +426,7 @@ class XDMFSeries:
         lay.counts = comm.bcast(lay.counts, root=0)
         self.send_counts = comm.gather(sum(local[f.center] * f.ncomp for f in self.fields), root=0)
 
+
     def _collective(self, action) -> None:
         """Run ``action`` on rank 0; raise its failure (as SeriesError) on every rank."""
         error = None
@@ -462,25 +443,18 @@ class XDMFSeries:
         if isinstance(exc, SeriesError):
             return str(exc)
         if isinstance(exc, OSError):
-            return describe_oserror(exc) + ("" if exc.filename else f" (writing in {self.directory})")
+            return describe_oserror(exc) + ("" if _filename(exc) else f" (writing in {self.directory})")
         return f"{type(exc).__name__}: {exc}"
-
-    def _raise_pending(self) -> None:
-        """Rank 0: raise the background writer's failure, if it had one, with the failed level's time."""
-        if self._worker is not None and self._worker.error is not None:
-            raise SeriesError(self._describe(self._worker.error), self._worker.error_t)
 
     def _open(self, keep_until: float | None) -> None:
         self.data_dir.mkdir(parents=True, exist_ok=True)
-        if self.tmp.exists():
-            self.tmp.unlink()  # left by a kill during a rewrite; the real file is intact
+        self.tmp.unlink(missing_ok=True)  # left by a kill during a rewrite; the real file is intact
         if keep_until is not None and self.path.exists():
             self._continue(keep_until)
         else:
             for stale in self.data_dir.glob("levels_*.h5"):
                 stale.unlink()
-            if self.path.exists():
-                self.path.unlink()
+            self.path.unlink(missing_ok=True)
             self._write_mesh()
 
     def _write_mesh(self) -> None:
@@ -494,7 +468,7 @@ class XDMFSeries:
         os.replace(tmp, path)
 
     def _continue(self, keep_until: float) -> None:
-        """Keep the levels with t <= keep_until of the existing series, check its mesh, drop unreferenced chunks."""
+        """Keep the levels with t <= keep_until of the existing series, check its mesh, drop unlisted chunks."""
         import h5py
 
         mesh = self.data_dir / "mesh.h5"
@@ -510,9 +484,8 @@ class XDMFSeries:
             root = ET.parse(self.path).getroot()
         except ET.ParseError as exc:
             raise SeriesError(f"{self.path}: not readable XML ({exc})") from None
-        coll = root.find("Domain/Grid")
         tol = 1e-12 * max(1.0, abs(keep_until))
-        kept = [g for g in coll.findall("Grid") if float(g.find("Time").get("Value")) <= keep_until + tol]
+        kept = [g for g in root.find("Domain/Grid").findall("Grid") if float(g.find("Time").get("Value")) <= keep_until + tol]
         referenced = set()
         for g in kept:
             ET.indent(g, space="  ", level=3)
@@ -520,9 +493,8 @@ class XDMFSeries:
             self.grids.append("      " + ET.tostring(g, encoding="unicode"))
             self.times.append(float(g.find("Time").get("Value")))
             referenced |= {item.text.strip().split(":", 1)[0] for item in g.iter("DataItem")}
-        self.base = len(self.grids)
-        self._rewrite(padded=True)
-        for chunk in self.data_dir.glob("levels_*.h5"):
+        self._write_xml(self.grids)
+        for chunk in self.data_dir.glob("levels_*.h5"):  # a new chunk is named after len(kept): no clash
             if f"fields/{chunk.name}" not in referenced:
                 chunk.unlink()
 
@@ -546,35 +518,18 @@ class XDMFSeries:
             comm.Gatherv(np.ascontiguousarray(buf), (recv, self.send_counts) if comm.rank == 0 else None, root=0)
         else:
             recv = buf
-        self._collective(lambda: self._submit(float(t), recv))
+        self._collective(lambda: self._write_level(float(t), list(self._global(recv))))
 
     def flush(self) -> None:
-        """Wait until every level asked for is written (collective); raise a failure of any of them."""
-        if self.closed:
-            return
+        """List every level written so far: close the open chunk and replace the XML (collective).
 
-        def wait() -> None:
-            if self._worker is not None:
-                self._worker.wait()
-            self._raise_pending()
+        The stepper calls it before a checkpoint, so that a checkpoint never runs ahead of the listed series."""
+        def flush() -> None:
+            self._raise_error()
+            self._list_open_chunk()
 
-        self._collective(wait)
-
-    def _submit(self, t: float, recv: np.ndarray) -> None:
-        """Rank 0: write the level, or hand it to the background writer (values copied into file order first).
-
-        Small levels are written here: the thread's cost (the GIL passed back and forth, about
-        0.3 ms per level, measured at n = 32) exceeds their write, which never waits for the
-        disk long. Large ones go to the thread, whose ``pwrite`` may wait for the disk.
-        """
-        self._raise_pending()
-        fields = list(self._global(recv))  # new arrays: the caller may change its own after write() returns
-        if self._slot_bytes() < BACKGROUND_BYTES and os.environ.get(BACKGROUND_ENV) != "1":
-            self._write_level(t, fields)
-            return
-        if self._worker is None:
-            self._worker = _Worker()
-        self._worker.submit(t, lambda: self._write_level(t, fields))
+        if not self.closed:
+            self._collective(flush)
 
     def _global(self, recv: np.ndarray):
         """Rank 0: each field's values in file order (one gather through an index computed once)."""
@@ -588,106 +543,73 @@ class XDMFSeries:
                     take.reshape(-1, f.ncomp)[r] = pos + np.arange(len(r) * f.ncomp).reshape(-1, f.ncomp)
                     pos += len(r) * f.ncomp
         for f in self.fields:
-            yield f.name, recv[self._take[f.name]]
+            values = recv[self._take[f.name]]
+            yield f.name, (values if f.ncomp == 1 else values.reshape(-1, f.ncomp))
 
     def _write_level(self, t: float, fields: list[tuple[str, np.ndarray]]) -> None:
-        """The background writer: a level's data into its chunk, then its grid into the XML."""
-        index = len(self.grids)
-        if self.chunk is None or index >= self.chunk.first + self.chunk.slots:
-            self._new_chunk(index)
-        chunk = self.chunk
-        slot = index - chunk.first
-        for i, (name, data) in enumerate(fields):
-            offset = chunk.offsets[slot][name]
-            if i == 0 and self.hook.armed("data"):
-                _pwrite_all(chunk.fd, memoryview(data).cast("B")[: data.nbytes // 2], offset)
-                self.hook.kill()
-            _pwrite_all(chunk.fd, data, offset)
-        self._append(self._grid_format.format(t=_fmt_time(t), file=f"fields/{chunk.path.name}", slot=f"{slot:04d}"))
-        self.times.append(t)
-
-    def _slot_bytes(self) -> int:
-        return sum(self.layout.counts[f.center] * f.ncomp * self.dtype.itemsize for f in self.fields)
-
-    def _template(self, slots: int) -> _Template:
-        """An HDF5 chunk of ``slots`` levels made once by HDF5, kept as the bytes that are not data.
-
-        Every dataset is contiguous and allocated at creation without fill, so the file is
-        metadata plus one raw region per dataset; copying the metadata bytes into a new file
-        of the same size makes another valid chunk without calling HDF5 (which costs about
-        35 us per dataset).
-        """
-        import h5py
-
-        if slots in self._templates:
-            return self._templates[slots]
-        path = self.data_dir / ".template.h5"
-        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-        dcpl.set_layout(h5py.h5d.CONTIGUOUS)
-        dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
-        dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
-        dcpl.set_obj_track_times(False)
-        tid = h5py.h5t.py_create(self.dtype)
-        offsets, regions = [], []
-        with h5py.File(path, "w") as h5:
-            h5.attrs["about"] = ("solver.xdmf chunk: group NNNN holds level (first + NNNN) of the series; "
-                                 "only the levels listed in the .xdmf file are complete")
-            for s in range(slots):
-                group = h5.create_group(f"{s:04d}")
-                row = {}
-                for f in self.fields:
-                    shape = (self.layout.counts[f.center],) if f.ncomp == 1 else (self.layout.counts[f.center], f.ncomp)
-                    ds = h5py.h5d.create(group.id, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
-                    row[f.name] = ds.get_offset()
-                    regions.append((row[f.name], row[f.name] + ds.get_storage_size()))
-                offsets.append(row)
-        size = path.stat().st_size
-        meta, pos = [], 0
-        with open(path, "rb") as fh:
-            for a, b in [*sorted(regions), (size, size)]:
-                if a < pos or b > size:
-                    raise SeriesError("HDF5 chunk template: overlapping or truncated data regions")
-                if a > pos:
-                    fh.seek(pos)
-                    meta.append((pos, fh.read(a - pos)))
-                pos = b
-        path.unlink()
-        self._templates[slots] = _Template(slots, size, meta, offsets)
-        return self._templates[slots]
-
-    def _chunk_slots(self, first: int) -> int:
-        """Levels in the chunk that starts at level ``first``: full chunks, the last one cut to the expected end."""
-        slots = max(1, min(MAX_LEVELS_PER_CHUNK, CHUNK_BYTES // max(1, self._slot_bytes())))
-        if self.target is not None and self.target > first:
-            slots = min(slots, self.target - first)
-        return slots
-
-    def _prepare_templates(self) -> None:
-        """Make the templates of the expected chunks now, so that no level pays for HDF5 (rank 0)."""
-        first = len(self.grids)
-        self._template(self._chunk_slots(first))
-        if self.target is not None and self.target > first:
-            full = self._chunk_slots(first)
-            self._template(self._chunk_slots(first + full * ((self.target - first - 1) // full)))
-
-    def _new_chunk(self, first: int) -> None:
-        """Create ``levels_<first>.h5`` (a copy of the template's metadata) and keep it open for raw writes."""
-        if self.chunk is not None:
-            _retire(self.chunk.fd)
-            self.chunk = None
-        template = self._template(self._chunk_slots(first))
-        path = self.data_dir / f"levels_{first:06d}.h5"
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)  # a chunk no listed level refers to
+        """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
+        self._raise_error()
         try:
-            os.ftruncate(fd, template.size)
-            for i, (offset, data) in enumerate(template.meta):
-                if i == len(template.meta) // 2 and self.hook.armed("chunk"):
-                    self.hook.kill()
-                _pwrite_all(fd, data, offset)
-        except BaseException:
-            os.close(fd)
-            raise
-        self.chunk = _Chunk(first, template.slots, path, fd, template.offsets)
+            if self.chunk is None:
+                first = len(self.grids)
+                self.chunk = _Chunk(self.data_dir / f"levels_{first:06d}.h5", first, self._chunk_slots(), self.dtype)
+            self.chunk.add(t, fields, self._grid_format)
+        except Exception as exc:
+            try:
+                self._list_open_chunk()  # its complete levels, if they can still be written
+            except SeriesError:
+                pass
+            self.error = (self._describe(exc), t)  # the first failure is the one reported
+            raise SeriesError(*self.error) from None
+        if self.chunk.full:
+            self._list_open_chunk()
+
+    def _raise_error(self) -> None:
+        self._raise_settled()
+        if self.error is not None:
+            raise SeriesError(*self.error)
+
+    def _raise_settled(self) -> None:
+        if self._settler is not None and self._settler.error is not None:
+            raise SeriesError(self._describe(self._settler.error))
+
+    def _chunk_slots(self) -> int:
+        """Levels per chunk: ``MAX_LEVELS_PER_CHUNK``, fewer if they would exceed ``CHUNK_BYTES``."""
+        level_bytes = sum(self.layout.counts[f.center] * f.ncomp * self.dtype.itemsize for f in self.fields)
+        return max(1, min(MAX_LEVELS_PER_CHUNK, CHUNK_BYTES // max(1, level_bytes)))
+
+    def _list_open_chunk(self) -> None:
+        """Rank 0: write the open chunk's file, then list its levels (the XML replaced), then settle it in the
+        background. A failure (the chunk file removed, the series takes no more levels) is a SeriesError with
+        the time of the chunk's last level."""
+        chunk, self.chunk = self.chunk, None
+        if chunk is None:
+            return
+        if not chunk.grids:  # its first level failed: nothing to write
+            chunk.h5.close()
+            return
+        try:
+            _close_chunk(chunk)
+            self._write_xml(self.grids + chunk.grids)
+        except Exception as exc:
+            self.error = (self._describe(exc), chunk.times[-1])
+            _remove(chunk.path)  # not listed: the space back for what follows (the checkpoint, the CSV)
+            raise SeriesError(*self.error) from None
+        self.grids += chunk.grids
+        self.times += chunk.times
+        if SETTLE_CHUNKS and not self.closed:
+            if self._settler is None:
+                self._settler = _Settler()
+            self._settler.submit(chunk.path)
+
+    def _write_xml(self, grids: list[str]) -> None:
+        """Replace ``solution.xdmf`` by the list of ``grids`` (none: no file)."""
+        if not grids:
+            self.path.unlink(missing_ok=True)
+            return
+        text = _HEAD.format(name=self.name) + "".join(grids) + _TAIL
+        _replace_file(self.path, self.tmp, text.encode())
+
 
     def _grid_xml(self) -> str:
         """The XML of one level with placeholders {t}, {file}, {slot}: topology and geometry from the mesh file."""
@@ -720,103 +642,43 @@ class XDMFSeries:
         lines.append("      </Grid>\n")
         return "\n".join(lines)
 
-    # ------------------------------------------------------------------ the XML
-
-    def _append(self, grid: str) -> None:
-        """List one more grid: write it into the padding (inert), then retire the old closing tags with one byte."""
-        if "--" in grid or "?>" in grid:
-            raise ValueError("a grid may not contain '--' or '?>'")
-        if self.fd is None:  # the first level: the file is created (atomically) with it
-            self.grids.append(grid)
-            self._rewrite(padded=True)
-            return
-        unit = (_REOPEN + grid + _MARK + _TAIL + _PAD_OPEN).encode()
-        if self.cursor + len(unit) > self.pad_end:  # padding used up: rewrite with more (amortized O(1))
-            self.grids.append(grid)
-            self._rewrite(padded=True, extra=len(unit))
-            return
-        if self.hook.armed("xml"):
-            _pwrite_all(self.fd, unit[: len(unit) // 2], self.cursor)
-            self.hook.kill()
-        _pwrite_all(self.fd, unit, self.cursor)
-        if self.hook.armed("flip"):
-            self.hook.kill()
-        _pwrite_all(self.fd, b"<", self.flip)  # the one byte that makes the grid live
-        self.grids.append(grid)
-        self.flip = self.cursor + len(_REOPEN) + len(grid)
-        self.cursor += len(unit)
-
-    def _rewrite(self, padded: bool, extra: int = 0) -> None:
-        """Write the whole file (listed grids; padded: plus marker, closing tags and padding) to a new name and rename it."""
-        if self.fd is not None:
-            os.close(self.fd)
-            self.fd = None
-        if not self.grids:
-            if self.path.exists():
-                self.path.unlink()
-            return
-        head = _HEAD.format(name=self.name) + "".join(self.grids)
-        if padded:
-            per_level = len(self.grids[-1]) + len(_REOPEN + _MARK + _TAIL + _PAD_OPEN) + 32
-            remaining = max(0, self.target - len(self.grids)) if self.target is not None else 0
-            reserve = max(remaining * per_level, len(head) + 2 * max(extra, per_level), 4096)  # grow geometrically
-            text = head + _MARK + _TAIL + _PAD_OPEN
-            body = text.encode()
-            data = body + b" " * reserve + _PAD_CLOSE.encode()
-        else:
-            data = (head + _TAIL).encode()
-        fd = os.open(self.tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        try:
-            _pwrite_all(fd, data, 0)
-        except BaseException:
-            os.close(fd)
-            self.tmp.unlink(missing_ok=True)
-            raise
-        os.close(fd)
-        os.replace(self.tmp, self.path)
-        if padded:
-            self.fd = os.open(self.path, os.O_WRONLY)
-            self.flip = len(head.encode())
-            self.cursor = len(body)
-            self.pad_end = len(body) + reserve
-
     # ------------------------------------------------------------------ closing
 
     def close(self) -> None:
-        """Wait for the background writer, close the data chunk and rewrite ``solution.xdmf`` without
-        padding (collective; idempotent). Raises a failure of the writes still pending.
+        """List the open chunk's levels and stop the settling thread (collective; idempotent).
 
-        If that rewrite fails (e.g. a full disk) the padded file stays: it is valid as it is.
+        Raises a failure of that last listing; a failure already raised by ``write`` is not raised again.
         """
         if self.closed:
             return
         self.closed = True
 
         def finish() -> None:
-            if self._worker is not None:
-                self._worker.stop()
-            failed = self._worker is not None and self._worker.error is not None
-            if self.chunk is not None:
-                os.close(self.chunk.fd)
-                self.chunk = None
-            if self.fd is not None:
-                try:
-                    self._rewrite(padded=False)
-                except OSError:
-                    pass
-                if self.fd is not None:
-                    os.close(self.fd)
-                    self.fd = None
-            if failed:
-                self._raise_pending()
+            try:
+                if self.error is None:  # after a failed write, the open chunk was listed (or dropped) then
+                    self._list_open_chunk()
+            finally:
+                if self._settler is not None:
+                    self._settler.stop()
+            self._raise_settled()
 
         self._collective(finish)
 
 
+def _filename(exc: OSError) -> str | None:
+    """The file an OSError is about; h5py's errors name it only inside HDF5's message."""
+    if exc.filename:
+        return exc.filename
+    found = re.search(r"filename = '([^']*)'", str(exc))
+    return found.group(1) if found else None
+
+
 def describe_oserror(exc: OSError) -> str:
-    """``No space left on device (writing results/fields/levels_000100.h5)``: the reason and the file."""
-    reason = exc.strerror or str(exc)
-    return f"{reason} ({exc.filename})" if exc.filename else reason
+    """``No space left on device (results/fields/levels_000100.h5)``: the reason and the file, on one line
+    (h5py's errors carry HDF5's multi-line message: the reason is taken from their errno)."""
+    reason = os.strerror(exc.errno) if exc.errno else (exc.strerror or str(exc)).splitlines()[0]
+    name = _filename(exc)
+    return f"{reason} ({name})" if name else reason
 
 
 def read_series(path: str | Path) -> dict:
@@ -856,4 +718,5 @@ def read_series(path: str | Path) -> dict:
         for f in files.values():
             f.close()
     return out
+
 

@@ -1,6 +1,6 @@
 """Render a results directory with ParaView: run me with ``pvbatch`` (or ``pvpython``), not with the solver's Python.
 
-    pvbatch --force-offscreen-rendering solver/paraview_script.py RESULTS_DIR [--field von_mises_elastic] [--time T]
+    pvbatch --force-offscreen-rendering solver/post/paraview_script.py RESULTS_DIR [--field von_mises_elastic] [--time T]
         [--warp W] [--output PNG] [--size 1200 800]
 
 (``python -m solver paraview RESULTS_DIR ...`` does this for you, under ``xvfb-run`` when there is no display.)

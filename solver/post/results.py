@@ -10,7 +10,7 @@ def read_results(directory: str | Path) -> dict:
     """Read a results directory through ``solution.xdmf``: node coordinates (``geometry``), cells
     (``topology``), the written ``times``, and ``fields`` {field: {t: values}} (P1 fields per node,
     DG0 fields per cell; tensors as XX, YY, ZZ, XY, YZ, XZ). Rows are in the mesh's input order,
-    the same whatever the number of ranks that wrote them (solver/xdmf.py)."""
+    the same whatever the number of ranks that wrote them (solver/io/xdmf.py)."""
     from solver.io.xdmf import read_series
 
     res = read_series(Path(directory) / "solution.xdmf")

@@ -4,7 +4,7 @@ The error is the paper's norm, max over levels of ||eps(u - u_exact)|| + ||zeta 
 (docs/model.md §3.6). It is bounded by a space part and a time part (``accuracy.space_share``,
 default one half, bounds the time part's share by 1 - space_share):
 
-- **space, displacement** -- the residual estimator (solver/estimator.py) times a constant C
+- **space, displacement** -- the residual estimator (solver/physics/estimator.py) times a constant C
   measured against known errors (``study estimator``: C = error/eta is 3.0-3.9e-3 for P1 and
   1.55-1.74e-3 for P2 on Example 1, E = 100, nu = 0.3, uniform and adapted meshes). C scales
   as 1/(2 mu) (eta is a stress, the error a strain), so C = c_p / (2 mu) with the largest

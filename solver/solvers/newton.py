@@ -44,7 +44,7 @@ class NewtonTest:
     With 1/mu ~ 1e10 the residual has a round-off floor ~ eps ||J|| ||u|| that can exceed rtol * scale; a
     correction below rtol ||u|| then means the active set is settled and the direct solve exact. While the
     cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE): on the
-    hard scene of tests/test_damped_newton.py the failing level stops after 9 of its 25 iterations.
+    hard scene of tests/solvers/test_damped_newton.py the failing level stops after 9 of its 25 iterations.
     """
 
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:

@@ -1,4 +1,4 @@
-"""The written cell stresses (solver/outputs.py) equal the L2 projection onto cell constants assembled from UFL."""
+"""The written cell stresses (solver/io/fields.py) equal the L2 projection onto cell constants assembled from UFL."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Accuracy on demand (solver/accuracy.py): what a tolerance chooses, the same on 2 ranks as on one, what it
+"""Accuracy on demand (solver/run/accuracy.py): what a tolerance chooses, the same on 2 ranks as on one, what it
 reports, and the refusals. Whether the achieved error meets the tolerance is measured by ``study tolerance``
 against fine references; here one small case checks it in the suite."""
 

@@ -1,4 +1,4 @@
-"""The damped fallback of the semismooth Newton (solver/damped_newton.py): a level on which plain Newton cycles
+"""The damped fallback of the semismooth Newton (solver/solvers/damped_newton.py): a level on which plain Newton cycles
 between active sets is solved by it, the same on every number of ranks."""
 
 import pytest
