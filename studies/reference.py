@@ -32,7 +32,7 @@ class PointwiseError:
     is exact where the reference is smooth in a judged cell; where the reference's strain
     jumps inside one (a finer reference), the rule integrates a discontinuity: against the
     exact error of nested meshes this measured 0.3-0.6 % of the error
-    (tests/studies/test_reference.py).
+    (tests/studies/test_fine_reference.py).
     """
 
     def __init__(self, V_ref, Z_ref, model, q: int = 4) -> None:
