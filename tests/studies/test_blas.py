@@ -1,0 +1,59 @@
+"""studies/blas.py: which BLAS a process runs on, and the refusal to benchmark on the reference one."""
+
+import pytest
+
+from studies import blas
+
+MAPS = """7f00-7f01 r--p 00000000 08:01 1 /usr/lib/x86_64-linux-gnu/libpetsc_real.so.3.18.1
+7f01-7f02 r-xp 00000000 08:01 2 /usr/lib/x86_64-linux-gnu/{lib}
+7f02-7f03 r--p 00001000 08:01 2 /usr/lib/x86_64-linux-gnu/{lib}
+7f03-7f04 rw-p 00000000 00:00 0 [heap]
+7f04-7f05 r-xp 00000000 08:01 3 /usr/lib/x86_64-linux-gnu/libcblas.so.3
+"""
+
+
+@pytest.mark.parametrize("path, kind", [
+    ("/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.11.0", "reference"),
+    ("/usr/lib64/libblas.so.3.9.0", "reference"),
+    ("/usr/lib/x86_64-linux-gnu/openblas-serial/libblas.so.3", "openblas"),
+    ("/usr/lib/x86_64-linux-gnu/openblas-pthread/libopenblasp-r0.3.21.so", "openblas"),
+    ("/opt/intel/lib/libmkl_rt.so.2", "mkl"),
+    ("/usr/lib/x86_64-linux-gnu/blis-openmp/libblis.so.4", "blis"),
+])
+def test_classify_names_the_library(path, kind):
+    assert blas.classify(path) == kind
+
+
+def test_mapped_blas_reads_each_library_once_and_skips_other_files():
+    libs = blas.mapped_blas(MAPS.format(lib="no-such-dir/libblas.so.3"))
+    assert libs == ("/usr/lib/x86_64-linux-gnu/no-such-dir/libblas.so.3",)  # libcblas: a wrapper, not a BLAS
+    assert blas.mapped_blas("7f03-7f04 rw-p 00000000 00:00 0 [heap]\n") == ()
+
+
+def test_this_process_runs_on_a_known_blas():
+    info = blas.detect()
+    assert info.libraries and info.kind in blas.KINDS and info.kind != "unknown"
+    assert info.kind in info.label()
+
+
+def test_reference_blas_is_refused_unless_allowed(capsys):
+    ref = blas.BlasInfo("reference", ("/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.11.0",))
+    assert not blas.require_optimized(ref, allow=False, what="bench")
+    err = capsys.readouterr().err
+    assert err.startswith("error: bench:") and err.count("\n") == 1 and blas.ALLOW_FLAG in err
+    assert blas.require_optimized(ref, allow=True, what="bench")
+    assert blas.require_optimized(blas.BlasInfo("openblas", ("/x/libopenblas.so.0",)), allow=False, what="bench")
+    assert "reference" in blas.report_line(ref.as_dict()) and "not recorded" in blas.report_line(None)
+
+
+@pytest.mark.serial
+def test_bench_commands_refuse_to_measure_on_the_reference_blas(monkeypatch, tmp_path):
+    """Exit code 2 before any case runs (the detection is replaced by a reference BLAS)."""
+    from studies import bench, scaling
+
+    ref = blas.BlasInfo("reference", ("/usr/lib/x86_64-linux-gnu/blas/libblas.so.3.11.0",))
+    monkeypatch.setattr(blas, "detect", lambda load=True: ref)
+    monkeypatch.setattr(scaling, "spawn", lambda *a, **k: pytest.fail("a case ran"))
+    assert bench.main(["--sizes", "--no-output", "--no-reference", "--output", str(tmp_path)]) == 2
+    assert bench.main(["--scaling", "--sizes", "2", "--output", str(tmp_path)]) == 2
+    assert not (tmp_path / "bench.json").exists()
