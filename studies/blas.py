@@ -111,3 +111,87 @@ def report_line(info: dict | None) -> str:
         return f"**BLAS: netlib's reference BLAS** ({', '.join(b.libraries)}): factorizations and dense products are " \
                f"several times slower than on OpenBLAS ({ALLOW_FLAG})."
     return f"BLAS: {b.label()}."
+
+
+# ----------------------------------------------------------------------------------------------- comparison
+# ``python -m studies.blas compare DIR ...``: the same work on each BLAS, alternated, in fresh processes whose
+# loader finds the library in DIR first (LD_LIBRARY_PATH; "system" = the alternatives' choice): a dense numpy
+# product and the plain-elasticity MUMPS Cholesky of studies/anchor.py. Written to blas.md / blas.json.
+PRODUCT = ("import time, numpy as np; a = np.random.default_rng(0).random((1500, 1500)); a @ a; t = time.perf_counter(); "
+           "a @ a; print(time.perf_counter() - t)")
+
+
+def _run_on(directory: str, cmd: list[str], env_extra: dict[str, str]) -> str:
+    import subprocess
+
+    env = dict(os.environ, **env_extra)
+    if directory != "system":
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(x for x in (directory, env.get("LD_LIBRARY_PATH", "")) if x)
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True)
+    return res.stdout.strip().splitlines()[-1]
+
+
+def compare(directories: list[str], n: int, reps: int, threads: str | None) -> list[dict]:
+    """Median product and factorization times per library, runs alternated A B A B over ``reps`` rounds."""
+    import json
+    import statistics
+
+    env = {"OPENBLAS_NUM_THREADS": threads} if threads else {}
+    probe = [sys.executable, "-c", "import json; from studies.blas import detect; print(json.dumps(detect().as_dict()))"]
+    rows = [{"directory": d, "blas": json.loads(_run_on(d, probe, env)), "product_s": [], "factor_s": []}
+            for d in directories]
+    for _ in range(reps):
+        for row in rows:
+            row["product_s"].append(float(_run_on(row["directory"], [sys.executable, "-c", PRODUCT], env)))
+            case = json.loads(_run_on(row["directory"], [sys.executable, "-m", "studies.anchor", str(n), "mumps"], env))
+            row["factor_s"].append(case["setup_s"])
+            row.update(dofs=case["dofs"], norm_u=case["norm_u"])
+    for row in rows:
+        row["product_median_s"] = statistics.median(row["product_s"])
+        row["factor_median_s"] = statistics.median(row["factor_s"])
+    return rows
+
+
+def compare_table(rows: list[dict], n: int, reps: int, threads: str | None) -> str:
+    base = rows[0]
+    lines = [f"# BLAS against BLAS: one process, {reps} alternated rounds, medians", "",
+             f"Command: `python -m studies.blas compare --n {n} --reps {reps} "
+             f"{'--threads ' + threads + ' ' if threads else ''}DIR ...`. Dense product: numpy 1500 x 1500 @ 1500 x 1500. "
+             f"Factorization: MUMPS Cholesky of the plain elasticity cube n = {n} ({rows[0].get('dofs', 0):,} dofs, "
+             "studies/anchor.py, ICNTL(14) = 50, default ordering). Ratios to the first row.", "",
+             "| BLAS | threads | product (s) | ratio | factorization (s) | ratio | all runs: product; factorization (s) "
+             "| norm of u |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        b = r["blas"]
+        name = b["kind"] + (f" ({os.path.basename(r['directory'])})" if r["directory"] != "system" else " (system)")
+        runs = ", ".join(f"{x:.3g}" for x in r["product_s"]) + "; " + ", ".join(f"{x:.3g}" for x in r["factor_s"])
+        lines.append(f"| {name} | {b.get('threads') or 1} | {r['product_median_s']:.3g} "
+                     f"| {r['product_median_s'] / base['product_median_s']:.2f} | {r['factor_median_s']:.3g} "
+                     f"| {r['factor_median_s'] / base['factor_median_s']:.2f} | {runs} | {r['norm_u']:.15g} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import json
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(prog="python -m studies.blas compare", description="the same work on several BLAS")
+    p.add_argument("command", choices=["compare"])
+    p.add_argument("directories", nargs="+", help="directories holding a libblas.so.3 (system: the installed choice)")
+    p.add_argument("--n", type=int, default=22, help="cube size of the factorization (3 (n+1)^3 dofs)")
+    p.add_argument("--reps", type=int, default=3)
+    p.add_argument("--threads", default=None, help="OPENBLAS_NUM_THREADS for every run (default: the library's own)")
+    p.add_argument("--output", default=None, help="directory for blas.md and blas.json (default: print only)")
+    a = p.parse_args(argv)
+    rows = compare(a.directories, a.n, a.reps, a.threads)
+    text = compare_table(rows, a.n, a.reps, a.threads)
+    print(text)
+    if a.output:
+        Path(a.output, "blas.md").write_text(text)
+        Path(a.output, "blas.json").write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
