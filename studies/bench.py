@@ -321,8 +321,11 @@ def main(argv: list[str] | None = None) -> int:
         from studies.scaling import main as scaling_main
 
         return scaling_main([a for a in argv if a != "--scaling"])
+    if "--blas" in argv:  # the same work on several BLAS libraries (studies/blas.py), its own options
+        return blas.main(["compare", *[a for a in argv if a != "--blas"]])
     p = argparse.ArgumentParser(prog="python -m studies bench", description=__doc__.splitlines()[0],
-                                epilog="python -m studies bench --scaling --help: the 3-D scaling benchmark")
+                                epilog="python -m studies bench --scaling --help: the 3-D scaling benchmark; "
+                                       "python -m studies bench --blas --help: BLAS against BLAS")
     p.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128, 256], help="n of the size cases (none: skip them)")
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
     p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference runs")

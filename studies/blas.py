@@ -114,9 +114,10 @@ def report_line(info: dict | None) -> str:
 
 
 # ----------------------------------------------------------------------------------------------- comparison
-# ``python -m studies.blas compare DIR ...``: the same work on each BLAS, alternated, in fresh processes whose
-# loader finds the library in DIR first (LD_LIBRARY_PATH; "system" = the alternatives' choice): a dense numpy
-# product and the plain-elasticity MUMPS Cholesky of studies/anchor.py. Written to blas.md / blas.json.
+# ``python -m studies bench --blas DIR ...`` (or ``python -m studies.blas compare DIR ...``): the same work on
+# each BLAS, alternated, in fresh processes whose loader finds the library in DIR first (LD_LIBRARY_PATH;
+# "system" = the alternatives' choice): a dense numpy product and the plain-elasticity MUMPS Cholesky of
+# studies/anchor.py. Written to blas.md / blas.json.
 PRODUCT = ("import time, numpy as np; a = np.random.default_rng(0).random((1500, 1500)); a @ a; t = time.perf_counter(); "
            "a @ a; print(time.perf_counter() - t)")
 
@@ -176,8 +177,8 @@ def main(argv: list[str] | None = None) -> int:
     import json
     from pathlib import Path
 
-    p = argparse.ArgumentParser(prog="python -m studies.blas compare", description="the same work on several BLAS")
-    p.add_argument("command", choices=["compare"])
+    p = argparse.ArgumentParser(prog="python -m studies bench --blas", description="the same work on several BLAS")
+    p.add_argument("command", choices=["compare"], help=argparse.SUPPRESS)
     p.add_argument("directories", nargs="+", help="directories holding a libblas.so.3 (system: the installed choice)")
     p.add_argument("--n", type=int, default=22, help="cube size of the factorization (3 (n+1)^3 dofs)")
     p.add_argument("--reps", type=int, default=3)

@@ -57,3 +57,15 @@ def test_bench_commands_refuse_to_measure_on_the_reference_blas(monkeypatch, tmp
     assert bench.main(["--sizes", "--no-output", "--no-reference", "--output", str(tmp_path)]) == 2
     assert bench.main(["--scaling", "--sizes", "2", "--output", str(tmp_path)]) == 2
     assert not (tmp_path / "bench.json").exists()
+
+
+def test_compare_table_gives_ratios_to_the_first_library_and_every_run():
+    def row(d, kind, threads, products, factors):
+        return {"directory": d, "blas": {"kind": kind, "threads": threads}, "product_s": products, "factor_s": factors,
+                "product_median_s": sorted(products)[1], "factor_median_s": sorted(factors)[1], "dofs": 36501,
+                "norm_u": 42.3}
+    rows = [row("system", "reference", None, [8.0, 9.0, 10.0], [30.0, 40.0, 50.0]),
+            row("/x/openblas-serial", "openblas", 1, [0.4, 0.45, 0.5], [4.0, 5.0, 6.0])]
+    text = blas.compare_table(rows, 22, 3, None)
+    assert "| reference (system) | 1 | 9 | 1.00 | 40 | 1.00 | 8, 9, 10; 30, 40, 50 |" in text
+    assert "| openblas (openblas-serial) | 1 | 0.45 | 0.05 | 5 | 0.12 |" in text and "36,501 dofs" in text
