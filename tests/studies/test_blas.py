@@ -69,3 +69,31 @@ def test_compare_table_gives_ratios_to_the_first_library_and_every_run():
     text = blas.compare_table(rows, 22, 3, None)
     assert "| reference (system) | 1 | 9 | 1.00 | 40 | 1.00 | 8, 9, 10; 30, 40, 50 |" in text
     assert "| openblas (openblas-serial) | 1 | 0.45 | 0.05 | 5 | 0.12 |" in text and "36,501 dofs" in text
+
+
+@pytest.mark.serial
+def test_the_install_path_brings_openblas_and_unpins_the_reference_blas(tmp_path):
+    """make system-packages (dry, SUDO=echo, every package 'installed' but OpenBLAS) installs libopenblas0-serial
+    and sets an alternative left on netlib's library back to automatic."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).parents[2]
+    if shutil.which("make") is None or shutil.which("dpkg") is None:
+        pytest.skip("needs make and dpkg")
+    text = (root / "Makefile").read_text()
+    assert "libopenblas0-serial" in text.split("APT_PACKAGES :=", 1)[1].split("\nifeq", 1)[0]
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    # dpkg -s says every package is there but OpenBLAS; readlink -f says the alternatives point to netlib's files
+    (fake / "dpkg").write_text('#!/bin/sh\ncase "$2" in libopenblas*) exit 1;; esac\nexit 0\n')
+    (fake / "readlink").write_text('#!/bin/sh\necho /usr/lib/x86_64-linux-gnu/blas/libblas.so.3.11.0\n')
+    (fake / "ls").write_text('#!/bin/sh\necho libblas.so.3-x86_64-linux-gnu\n')
+    for f in fake.iterdir():
+        f.chmod(0o755)
+    env = {"PATH": f"{fake}:/usr/bin:/bin", "HOME": str(tmp_path)}
+    res = subprocess.run(["make", "-s", "system-packages", "SUDO=echo"], cwd=root, env=env, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "apt-get install -y -qq --no-install-recommends libopenblas0-serial" in res.stdout
+    assert "update-alternatives --quiet --auto libblas.so.3-x86_64-linux-gnu" in res.stdout
