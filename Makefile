@@ -11,7 +11,11 @@ PY := .venv/bin/python
 # PLOTS=0 leaves out the plotting stack (matplotlib, pyvista/VTK and the EGL it renders with off-screen):
 # runs, studies and tests work without it; `solver plot` and the charts then say what is missing
 PLOTS ?= 1
-APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-tomlkit python3-scipy python3-venv python3-pip openmpi-bin
+# libopenblas0-serial: an optimized BLAS/LAPACK for MUMPS, numpy and LAPACK (Debian's default libblas3 is netlib's
+# reference BLAS, 8x slower on a 107k-dof MUMPS Cholesky, issue 30); the serial build, so that mpirun's ranks do not
+# each start BLAS threads on the same cores. `python -m studies bench` names the BLAS it ran on.
+APT_PACKAGES := python3-dolfinx-real python3-gmsh python3-h5py python3-tomlkit python3-scipy python3-venv python3-pip openmpi-bin \
+	libopenblas0-serial
 ifeq ($(PLOTS),1)
 APT_PACKAGES += python3-matplotlib libegl1 libegl-mesa0
 EXTRAS := dev,plots
@@ -34,6 +38,13 @@ system-packages:
 	  echo "installing Debian packages:$$missing"; \
 	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
+	@# OpenBLAS registers itself above netlib's BLAS; an alternative left pinned (manual) to netlib is set back to
+	@# automatic (the highest priority), any other manual choice (MKL, BLIS) is kept
+	@for alt in $$(ls /etc/alternatives | grep -E '^lib(blas|lapack)\.so\.3-'); do \
+	  case "$$(readlink -f /etc/alternatives/$$alt)" in */blas/*|*/lapack/*) \
+	    echo "BLAS: $$alt was netlib's reference library, now automatic (OpenBLAS)"; $(SUDO) update-alternatives --quiet --auto $$alt;; \
+	  esac; \
+	done
 
 # pip is held to Debian's numpy (petsc4py is built against it) by a constraints file
 .venv/.installed: pyproject.toml | system-packages

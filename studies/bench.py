@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from studies import REPO as ROOT  # noqa: E402
+from studies import blas
 
 EXAMPLE1 = ROOT / "configs" / "example1.toml"
 # discretization variants of the constant-kernel case: "<space>-order<k>" (P2 at n has the dofs of P1 at 2n)
@@ -174,7 +175,8 @@ def _table(results: dict) -> str:
             f"| {c['floor_ms']['total']:.2f} | {c['ratio']:.2f} | {s['output']:.2f} "
             f"| {c['newton_per_step']:.2f} | {c['factorizations_per_step']:.3f} | {c['peak_mib_max']:.0f} |"
         )
-    out = ["## Time per step (Example 1, k = 0.01, 100 steps; medians over steps 1-100)", "", *lines, ""]
+    out = [blas.report_line(results.get("blas")), "",
+           "## Time per step (Example 1, k = 0.01, 100 steps; medians over steps 1-100)", "", *lines, ""]
     out += ["Floor = displacement solve + damage solve + assembly of both right-hand sides (medians of 20, same run). "
             "Step = the step without its output; output = writing the level (default fields, XDMF included), "
             "every level written.", ""]
@@ -319,19 +321,27 @@ def main(argv: list[str] | None = None) -> int:
         from studies.scaling import main as scaling_main
 
         return scaling_main([a for a in argv if a != "--scaling"])
+    if "--blas" in argv:  # the same work on several BLAS libraries (studies/blas.py), its own options
+        return blas.main(["compare", *[a for a in argv if a != "--blas"]])
     p = argparse.ArgumentParser(prog="python -m studies bench", description=__doc__.splitlines()[0],
-                                epilog="python -m studies bench --scaling --help: the 3-D scaling benchmark")
+                                epilog="python -m studies bench --scaling --help: the 3-D scaling benchmark; "
+                                       "python -m studies bench --blas --help: BLAS against BLAS")
     p.add_argument("--sizes", type=int, nargs="*", default=[32, 64, 128, 256], help="n of the size cases (none: skip them)")
     p.add_argument("--nproc", type=int, default=2, help="ranks for the parallel runs (0: none)")
     p.add_argument("--no-reference", action="store_true", help="skip the 2000-step reference runs")
     p.add_argument("--no-discretizations", action="store_true", help="skip the P2 / second-order cases")
     p.add_argument("--no-output", action="store_true", help="skip the output cases (n = 32 and the 2000-level n = 128)")
     p.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument(blas.ALLOW_FLAG, action="store_true", help="measure even on netlib's reference BLAS (named in the report)")
     args = p.parse_args(argv)
+    lib = blas.detect()  # the cases are spawned with this environment, so they load the same library
+    print(f"BLAS: {lib.label()}", flush=True)
+    if not blas.require_optimized(lib, args.allow_reference_blas, "python -m studies bench"):
+        return 2
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
     results: dict = {"sizes": [], "speedup": {}, "memory_flat": [], "output": {}, "machine": os.uname().nodename,
-                     "cores": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M")}
+                     "cores": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M"), "blas": lib.as_dict()}
     tmp = Path(tempfile.mkdtemp(prefix=".bench-", dir=out))  # the cases' results, on the disk results go to
     try:
         for n in args.sizes:

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from studies import REPO as ROOT  # noqa: E402
+from studies import blas
 
 SCENE = ROOT / "configs" / "example1_3d.toml"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -80,7 +81,8 @@ def run_case(n: int, linear: str, steps: int) -> dict:
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MiB (Linux: KiB)
     solves = sum(r["linear_solves"] for r in steady)
     iterative = model.linear == "iterative"
-    return {
+    lib = blas.detect(load=False)
+    return {"blas": lib.kind, "blas_label": lib.label(),
         "n": n, "solver": linear, "resolved": model.linear, "nproc": comm.size, "steps": steps,
         "dofs": model.u.function_space.dofmap.index_map.size_global * 3,
         "cells": model.geo.mesh.topology.index_map(3).size_global,
@@ -92,7 +94,7 @@ def run_case(n: int, linear: str, steps: int) -> dict:
         "krylov_per_solve": sum(r["krylov_iterations"] for r in steady) / solves if iterative else None,
         "level0_krylov_per_solve": rows[0]["krylov_iterations"] / rows[0]["linear_solves"] if iterative else None,
         "damage_krylov_per_step": float(np.mean([r["damage_krylov_iterations"] for r in steady])) if iterative else None,
-        "setups_total": int(sum(r["factorizations"] for r in rows)),
+        "setups_total": int(sum(r["factorizations"] for r in rows)), "level0_setups": int(rows[0]["factorizations"]),
         "peak_mib_max": comm.allreduce(peak, op=MPI.MAX),
         "peak_mib_sum": comm.allreduce(peak, op=MPI.SUM),
         "contact_force": rows[-1]["contact_force"],
@@ -117,6 +119,43 @@ def spawn(n: int, solver: str, nproc: int, steps: int, timeout: float | None) ->
     case = json.loads(res.stdout.strip().splitlines()[-1])
     case.update(status="ok", wall_s=time.perf_counter() - t0)
     return case
+
+
+def anchor_key(solver: str, nproc: int, n: int) -> str:
+    return f"plain-{solver}/np{nproc}/n{n}"
+
+
+def spawn_anchor(n: int, solver: str, nproc: int, timeout: float | None) -> dict:
+    """The plain-elasticity anchor (studies/anchor.py) of size n in its own process; failures returned as such."""
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    cmd = [sys.executable, "-m", "studies.anchor", str(n), solver]
+    if nproc > 1:
+        cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
+    base = {"n": n, "solver": solver, "nproc": nproc, "dofs": dofs_of(n)}
+    try:
+        res = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {**base, "status": "failed", "reason": f"timed out after {timeout:.0f} s"}
+    if res.returncode != 0:
+        return {**base, "status": "failed", "reason": f"exit code {res.returncode}: {res.stderr.strip()[-300:]}"}
+    return {**json.loads(res.stdout.strip().splitlines()[-1]), "status": "ok"}
+
+
+def anchor_ratios(case: dict, plain: dict) -> dict:
+    """A case of the solver against the plain solve of the same size and ranks: time per step over one plain
+    solve (iterative) or level 0 over the plain factorization (direct), Krylov iterations, peak memory."""
+    out = {"peak": case["peak_mib_max"] / plain["peak_mib_max"],
+           "bytes_per_dof": case["peak_mib_sum"] * 2 ** 20 / case["dofs"],
+           "plain_bytes_per_dof": plain["peak_mib_sum"] * 2 ** 20 / plain["dofs"]}
+    if case["solver"] == "iterative":
+        out["step"] = case["step_s"] / plain["solve_s"]
+        out["krylov"] = case["krylov_per_solve"] / plain["iterations"] if plain["iterations"] else None
+    else:  # level 0 factors once per active set it meets (3-D Example 1: twice, contact engaging)
+        setups = case["level0_setups"] if "level0_setups" in case else case.get("setups_total")
+        out["level0"] = case["level0_s"] / plain["setup_s"]
+        out["per_factorization"] = case["level0_s"] / setups / plain["setup_s"] if setups else None
+        out["step"] = case["step_s"] / plain["solve_s"]
+    return out
 
 
 # ----------------------------------------------------------------------------------------------- predictions
@@ -239,16 +278,16 @@ def table(scaling: dict) -> str:
              f"Machine: {scaling.get('machine', '?')} ({scaling.get('cores', '?')} cores), {scaling.get('date', '?')}. "
              "Each case in its own process, nothing written. Step = median over the steps after level 0; "
              "level 0 holds the first factorizations or preconditioner set-ups. Peak = the largest resident set "
-             "of a rank (max) and their sum.", "",
+             "of a rank (max) and their sum.", "", blas.report_line(scaling.get("blas")) + " Per case: the BLAS column.", "",
              "| n | dofs | solver | ranks | steps | set-up (s) | level 0 (s) | step (ms) | damage | memory "
              "| displacement | diagnostics | Newton / step | Krylov its / solve (level 0, steps) "
-             "| factorizations or PC set-ups | peak MiB (max rank) | peak MiB (sum) | contact force at T | status |",
-             "|" + "---|" * 19]
+             "| factorizations or PC set-ups | peak MiB (max rank) | peak MiB (sum) | contact force at T | BLAS | status |",
+             "|" + "---|" * 20]
     order = {s: i for i, s in enumerate(SOLVERS)}
     for c in sorted(cases.values(), key=lambda c: (c["n"], order.get(c["solver"], 9), c["nproc"])):
         head = f"| {c['n']} | {c['dofs']:,} | {c['solver']} | {c['nproc']} | {c['steps']} "
         if c.get("status") != "ok":
-            lines.append(head + "| " * 13 + f"| {c.get('status')}: {c.get('reason', '')} |")
+            lines.append(head + "| " * 14 + f"| {c.get('status')}: {c.get('reason', '')} |")
             continue
         s = c["split_ms"]
         kry = (f"{c['level0_krylov_per_solve']:.1f}, {c['krylov_per_solve']:.1f}"
@@ -256,7 +295,7 @@ def table(scaling: dict) -> str:
         lines.append(head + f"| {_fmt_s(c['setup_s'])} | {_fmt_s(c['level0_s'])} | {1e3 * c['step_s']:,.1f} "
                      f"| {s['damage']:,.1f} | {s['memory']:,.1f} | {s['displacement']:,.1f} | {s['diagnostics']:,.1f} "
                      f"| {c['newton_per_step']:.2f} | {kry} | {c['setups_total']} | {c['peak_mib_max']:,.0f} "
-                     f"| {c['peak_mib_sum']:,.0f} | {c['contact_force']:.10g} | ok |")
+                     f"| {c['peak_mib_sum']:,.0f} | {c['contact_force']:.10g} | {c.get('blas', 'not recorded')} | ok |")
     lines += ["", "## Two ranks against one (time per step; level 0 in brackets)", "",
               "| n | dofs | solver | 1 rank (ms) | 2 ranks (ms) | speed-up | level 0 speed-up |", "|---|---|---|---|---|---|---|"]
     for c in sorted(cases.values(), key=lambda c: (c["n"], order.get(c["solver"], 9))):
@@ -265,8 +304,43 @@ def table(scaling: dict) -> str:
             lines.append(f"| {c['n']} | {c['dofs']:,} | {c['solver']} | {1e3 * c['step_s']:,.1f} "
                          f"| {1e3 * two['step_s']:,.1f} | {c['step_s'] / two['step_s']:.2f} "
                          f"| {c['level0_s'] / two['level0_s']:.2f} |")
-    lines += ["", *break_even(cases), "", *cost_model(scaling)]
+    lines += ["", *anchor_table(scaling), "", *break_even(cases), "", *cost_model(scaling)]
     return "\n".join(lines) + "\n"
+
+
+def anchor_table(scaling: dict) -> list[str]:
+    """Every case as a ratio to the plain elasticity solve of the same size and ranks (studies/anchor.py)."""
+    cases, anchors = scaling.get("cases", {}), scaling.get("anchors", {})
+    out = ["## Against a plain elasticity solve of the same size (studies/anchor.py)", "",
+           "The same cube, tetrahedra, E and nu, clamped at x = 0 and pulled at x = 1, with plain dolfinx and without "
+           "contact, memory or damage: CG + GAMG with the rigid motions as near-nullspace, rtol 1e-8 "
+           "(demo_elasticity.py), median of 3 solves from zero; and MUMPS's Cholesky (ICNTL(14) = 50, the default "
+           "ordering, the solver's). Measured in the same run as the cases, each in its own process. "
+           "Ratios: the solver's step over one plain solve, its level 0 over the plain set-up (factorization), and "
+           "per factorization (level 0 factors once per contact active set it meets: twice here), "
+           "Krylov iterations per solve over the plain solve's, peak memory (max rank) over the plain solve's.", "",
+           "| n | dofs | ranks | plain solver | plain set-up (s) | plain solve (s) | plain its | plain peak MiB "
+           "| plain B/dof | solver | step / plain solve | level 0 / plain set-up | level 0 per factorization "
+           "/ plain factorization | Krylov its ratio | peak ratio | solver B/dof |", "|" + "---|" * 16]
+    for a in sorted(anchors.values(), key=lambda a: (a["n"], a["solver"], a["nproc"])):
+        if a.get("status") != "ok":
+            out.append(f"| {a['n']} | {a['dofs']:,} | {a['nproc']} | {a['solver']} | {a.get('status')}: "
+                       f"{a.get('reason', '')} |" + " |" * 11)
+            continue
+        head = (f"| {a['n']} | {a['dofs']:,} | {a['nproc']} | {a['solver']} | {a['setup_s']:.3g} | {a['solve_s']:.3g} "
+                f"| {a['iterations']} | {a['peak_mib_max']:,.0f} | {a['peak_mib_sum'] * 2 ** 20 / a['dofs']:,.0f} ")
+        mine = "iterative" if a["solver"] == "gamg" else "mumps"
+        c = cases.get(key(mine, a["nproc"], a["n"]))
+        if not c or c.get("status") != "ok":
+            out.append(head + f"| {mine}: not measured |" + " |" * 6)
+            continue
+        r = anchor_ratios(c, a)
+        krylov = f"{r['krylov']:.2f}" if r.get("krylov") is not None else "-"
+        level0 = f"{r['level0']:.2f}" if "level0" in r else "-"
+        per = f"{r['per_factorization']:.2f}" if r.get("per_factorization") else "-"
+        out.append(head + f"| {mine} | {r['step']:.2f} | {level0} | {per} | {krylov} | {r['peak']:.2f} "
+                   f"| {r['bytes_per_dof']:,.0f} |")
+    return out
 
 
 RUN_STEPS = 50  # the length of 3-D Example 1 (T = 1, k = 0.02): the run the direct/iterative comparison prices
@@ -415,6 +489,19 @@ def write(scaling: dict, out: Path, readme: Path | None) -> None:
         update_readme(readme, readme_block(scaling))
 
 
+def run_anchor(scaling: dict, solver: str, nproc: int, n: int, redo: bool, timeout: float) -> None:
+    """Measure the plain-elasticity anchor beside a case (unless already there and not ``redo``)."""
+    anchors = scaling.setdefault("anchors", {})
+    k = anchor_key(solver, nproc, n)
+    if k in anchors and anchors[k].get("status") == "ok" and not redo:
+        return
+    anchors[k] = spawn_anchor(n, solver, nproc, timeout)
+    c = anchors[k]
+    print(f"{k}: " + (f"{c['status']}: {c.get('reason')}" if c["status"] != "ok" else
+                      f"set-up {c['setup_s']:.2f} s, solve {c['solve_s']:.3f} s, {c['iterations']} its, "
+                      f"peak {c['peak_mib_max']:,.0f} MiB"), flush=True)
+
+
 # ----------------------------------------------------------------------------------------------- command
 def default_steps(n: int) -> int:
     """5 steps up to about 2e5 dofs, 3 beyond."""
@@ -436,6 +523,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--output", default=str(RESULTS))
     p.add_argument("--no-readme", action="store_true", help="do not rewrite the README's generated block")
     p.add_argument("--report-only", action="store_true", help="run nothing: rewrite the fits and reports from bench.json")
+    p.add_argument("--no-anchor", action="store_true", help="do not run the plain-elasticity anchor (studies/anchor.py)")
+    p.add_argument(blas.ALLOW_FLAG, action="store_true", help="measure even on netlib's reference BLAS (named in the report)")
     a = p.parse_args(argv)
     bad = ([("--sizes", n, "must be >= 1") for n in a.sizes if n < 1]
            + [("--nproc", r, "must be >= 1") for r in a.nproc if r < 1]
@@ -446,17 +535,23 @@ def main(argv: list[str] | None = None) -> int:
         opt, value, allowed = bad[0]
         print(f"error: {opt} {value}: {allowed}", file=sys.stderr)
         return 2
+    lib = blas.detect()  # the cases are spawned with this environment, so they load the same library
+    print(f"BLAS: {lib.label()}", flush=True)
+    if not a.report_only and not blas.require_optimized(lib, a.allow_reference_blas, "python -m studies bench --scaling"):
+        return 2
     out = Path(a.output)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "bench.json"
     old = json.loads(path.read_text()).get("scaling", {}) if path.exists() else {}
-    scaling = {"cases": dict(old.get("cases", {})), "machine": os.uname().nodename, "cores": os.cpu_count(),
+    scaling = {"cases": dict(old.get("cases", {})), "anchors": dict(old.get("anchors", {})),
+               "machine": os.uname().nodename, "cores": os.cpu_count(), "blas": lib.as_dict(),
                "date": time.strftime("%Y-%m-%d %H:%M"), "k": K, "scene": str(SCENE.relative_to(ROOT))}
     cases = scaling["cases"]
     readme = None if a.no_readme or out.resolve() != RESULTS.resolve() else ROOT / "docs" / "benchmarks" / "scaling.md"
     timeout = a.timeout_s or max(3 * a.budget_s, 300.0)
     if a.report_only:
-        scaling.update({k: old[k] for k in ("machine", "cores", "date") if k in old})  # when it was measured
+        scaling.update({k: old[k] for k in ("machine", "cores", "date", "blas") if k in old})  # when it was measured
+        scaling.setdefault("blas", None)
     for solver in [] if a.report_only else a.solvers:
         for nproc in a.nproc:
             for n in sorted(a.sizes):
@@ -482,6 +577,9 @@ def main(argv: list[str] | None = None) -> int:
                                       f"{1e3 * c['step_s']:,.0f} ms/step, peak {c['peak_mib_max']:,.0f} MiB"), flush=True)
                 scaling["fit"] = fits(cases)
                 write(scaling, out, readme)
+                if not a.no_anchor and cases[k].get("status") == "ok" and solver in ("iterative", "mumps"):
+                    run_anchor(scaling, "gamg" if solver == "iterative" else "mumps", nproc, n, a.redo, timeout)
+                    write(scaling, out, readme)
     scaling["fit"] = fits(cases)
     write(scaling, out, readme)
     print(f"wrote {path} (\"scaling\"), {out / 'scaling.md'} and {out / 'scaling.png'}", flush=True)

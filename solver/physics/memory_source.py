@@ -83,12 +83,15 @@ class MemorySource:
         rows, cols, vals = [], [], []
         for c, (i, j) in enumerate(self.pairs):
             r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
-            for comp, gdir in ((i, j), (j, i)):  # 1/2 d_j u_i + 1/2 d_i u_j
-                v = 0.5 * grad[:, :, gdir, :]  # (cell, point, a)
+            # 1/2 d_j u_i + 1/2 d_i u_j; for i == j the two halves are one entry d_i u_i (0.5 g + 0.5 g == g
+            # exactly), so that the COO holds no duplicates: scipy's tocsr sums duplicates in place and keeps
+            # the whole unsummed buffer alive behind its slice (a third more memory for E in 3-D)
+            for comp, gdir, half in (((i, i, 1.0),) if i == j else ((i, j, 0.5), (j, i, 0.5))):
+                v = half * grad[:, :, gdir, :]  # (cell, point, a)
                 rows.append(np.broadcast_to(r, v.shape).ravel())
                 cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
                 vals.append(v.ravel())
-        # duplicates (i == j: two halves) are summed exactly; rows sorted by column, as the full tensor's were
+        # rows sorted by column, as the full tensor's were (tocsr sorts them)
         self.strain_operator = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                                shape=(len(self.pairs) * size_q, size_v)).tocsr()
         self._work = np.empty((2, len(self.pairs), size_q))  # the extrapolated strain, A eps

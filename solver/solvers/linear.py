@@ -22,6 +22,10 @@ from solver.errors import ConfigError
 # 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on.
 # Measured on 3-D Example 1, one rank (benchmarks/results/auto_3d/scaling.md): a 50-step run (the example's)
 # takes 1.2 s with MUMPS and 1.3 s iteratively at 6,591 dofs, 3.7 s and 2.6 s at 10,125, 57 s and 23 s at 59,049
+# Those runs were on netlib's reference BLAS. The re-measure on OpenBLAS (benchmarks/results/scaling.md, "Direct
+# against iterative", issue 30) found MUMPS faster for a 50-step run at 36,501 and 107,811 dofs on one rank. That
+# was on a 2-core machine loaded by other work, whose iterative steps were 9x their unloaded time, so the threshold
+# is kept until a quiet machine confirms it.
 AUTO_ITERATIVE_DOFS_3D = 10_000
 
 

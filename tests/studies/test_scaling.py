@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from studies import scaling
+from studies import blas, scaling
 
 
 def test_a_case_reports_its_figures_on_every_rank(comm):
@@ -93,7 +93,7 @@ def test_table_lists_skipped_cases_with_their_reason_and_the_speedups():
     assert "| 68 | 985,527 | mumps | 1 | 3 |" in text and "skipped: predicted 9999 s > budget 600 s" in text
     assert "| 20 | 27,783 | iterative | 200.0 | 100.0 | 2.00 | 2.00 |" in text
     rows = [ln for ln in text.splitlines() if ln.startswith("| 20 | 27,783 | iterative | ")]
-    assert [ln.count("|") for ln in rows] == [20, 20, 8]  # two cases with 19 columns, one speed-up row
+    assert [ln.count("|") for ln in rows] == [21, 21, 8]  # two cases with 20 columns, one speed-up row
 
 
 @pytest.mark.serial
@@ -101,7 +101,7 @@ def test_table_lists_skipped_cases_with_their_reason_and_the_speedups():
 def test_bench_scaling_writes_its_files_merges_bench_json_and_resumes(tmp_path):
     (tmp_path / "bench.json").write_text(json.dumps({"sizes": [{"n": 32}], "date": "earlier"}))
     args = ["bench", "--scaling", "--sizes", "2", "3", "--solvers", "iterative", "--nproc", "1", "2", "--steps", "1",
-            "--output", str(tmp_path)]
+            "--output", str(tmp_path), "--allow-reference-blas"]
     res = run_cli(args)
     assert res.returncode == 0, res.stderr
     data = json.loads((tmp_path / "bench.json").read_text())
@@ -111,11 +111,15 @@ def test_bench_scaling_writes_its_files_merges_bench_json_and_resumes(tmp_path):
     assert all(c["status"] == "ok" and c["steps"] == 1 for c in cases.values())
     assert np.isclose(cases["iterative/np1/n3"]["contact_force"], cases["iterative/np2/n3"]["contact_force"], rtol=1e-9)
     assert data["scaling"]["fit"]["iterative"]["step_s"]["points"] == 4
+    anchors = data["scaling"]["anchors"]  # the plain-elasticity anchor beside every case
+    assert sorted(anchors) == ["plain-gamg/np1/n2", "plain-gamg/np1/n3", "plain-gamg/np2/n2", "plain-gamg/np2/n3"]
+    assert all(c["status"] == "ok" and c["iterations"] > 0 for c in anchors.values())
+    assert data["scaling"]["blas"]["kind"] in blas.KINDS and all(c["blas"] for c in cases.values())
     md = (tmp_path / "scaling.md").read_text()
-    assert "| 3 | 192 | iterative | 2 | 1 |" in md and "Cost model" in md
+    assert "| 3 | 192 | iterative | 2 | 1 |" in md and "Cost model" in md and "| 3 | 192 | 2 | gamg |" in md
     # in pieces: a second call runs only what is missing, and a budget skips with its reason
     res = run_cli(["bench", "--scaling", "--sizes", "2", "3", "--solvers", "iterative", "mumps", "--nproc", "1",
-                   "--steps", "1", "--budget-s", "1e-9", "--output", str(tmp_path)])
+                   "--steps", "1", "--budget-s", "1e-9", "--output", str(tmp_path), "--allow-reference-blas"])
     assert res.returncode == 0, res.stderr
     assert "iterative/np1/n3: already measured" in res.stdout
     cases = json.loads((tmp_path / "bench.json").read_text())["scaling"]["cases"]
@@ -126,3 +130,23 @@ def test_bench_scaling_writes_its_files_merges_bench_json_and_resumes(tmp_path):
         bad = run_cli(["bench", "--scaling", opt, value, "--output", str(tmp_path)])
         assert bad.returncode == 2 and bad.stderr.count("\n") == 1  # one line: the option, its value, what is allowed
         assert bad.stderr.startswith(f"error: {opt} {value}") and "must be" in bad.stderr
+
+
+def test_anchor_table_reads_every_case_as_a_ratio_to_the_plain_solve():
+    """Step over one plain solve, Krylov iterations and peak memory over the plain solve's; direct: level 0 over
+    the plain factorization."""
+    n, dofs = 20, scaling.dofs_of(20)
+    cases = {scaling.key("iterative", 1, n): _case("iterative", 1, n, step_s=0.3, krylov_per_solve=30.0,
+                                                    peak_mib_max=400.0, peak_mib_sum=400.0),
+             scaling.key("mumps", 1, n): _case("mumps", 1, n, step_s=0.05, level0_s=12.0, peak_mib_max=600.0,
+                                               peak_mib_sum=600.0, level0_setups=2)}
+    plain = {"n": n, "nproc": 1, "dofs": dofs, "status": "ok", "setup_s": 0.5, "solve_s": 0.25, "iterations": 20,
+             "peak_mib_max": 200.0, "peak_mib_sum": 200.0}
+    anchors = {scaling.anchor_key("gamg", 1, n): dict(plain, solver="gamg"),
+               scaling.anchor_key("mumps", 1, n): dict(plain, solver="mumps", setup_s=4.0, solve_s=0.01, iterations=1),
+               scaling.anchor_key("gamg", 2, n): dict(plain, solver="gamg", nproc=2, status="failed", reason="x")}
+    text = "\n".join(scaling.anchor_table({"cases": cases, "anchors": anchors}))
+    per_dof = f"{400 * 2 ** 20 / dofs:,.0f}"
+    assert f"| iterative | 1.20 | - | - | 1.50 | 2.00 | {per_dof} |" in text
+    assert "| mumps | 5.00 | 3.00 | 1.50 | - | 3.00 |" in text  # level 0 holds two factorizations
+    assert "| 20 | 27,783 | 2 | gamg | failed: x |" in text
