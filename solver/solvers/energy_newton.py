@@ -27,8 +27,7 @@ from solver.solvers.damped_newton import DampedResult, _along, _line_minimum, ha
 from solver.solvers.linear import REASONS_SNES
 from solver.solvers.newton import NewtonSolver
 
-
-FREE_STEPS = 4  # a level's first steps to a new active set are taken in full, whatever their residual
+FREE_STEPS = 2  # a level's first steps to a new active set are taken in full, whatever their residual
 
 
 class EnergyNewtonSolver(NewtonSolver):
