@@ -187,12 +187,16 @@ def stability(args) -> int:
 
 
 def _kept_rows(path: Path, rows: list[dict]) -> list[dict]:
-    """The measured rows after the rows of ``path`` (an earlier run's CSV) of the methods not measured now: a
-    run of some methods adds their columns to the map without running the others again."""
+    """The rows of ``path`` (an earlier run's CSV) that were not measured now, then the measured rows: a run of
+    some methods (or cells) adds or replaces their points without running the others again."""
     if not path.exists():
         return rows
-    measured = {r["method"] for r in rows}
-    return [r for r in _read_rows(path) if r["method"] not in measured] + rows
+
+    def key(r: dict) -> tuple:
+        return r["scene"], r["method"], float(r["mu"]), int(r["n"]), float(r["k"])
+
+    measured = {key(r) for r in rows}
+    return [r for r in _read_rows(path) if key(r) not in measured] + rows
 
 
 def _wp_group(args: tuple) -> list[dict]:
@@ -219,10 +223,12 @@ def _read_rows(path: Path) -> list[dict]:
     def value(v: str):
         if v in ("True", "False"):
             return v == "True"
-        try:
-            return float(v)
-        except ValueError:
-            return v
+        for kind in (int, float):  # ints stay ints, so a CSV read and written again is unchanged
+            try:
+                return kind(v)
+            except ValueError:
+                pass
+        return v
 
     with open(path, newline="") as fh:
         return [{k: value(v) for k, v in r.items()} for r in csv.DictReader(fh)]
