@@ -7,10 +7,17 @@ Where the level's F = 0 is the minimum of the convex energy (contact without the
     E(u) = 1/2 u.K u - b.u + int P(u_nu - g) ds,      P' = p (the compliance law),
 
 every iterate is a Newton step d = -J(x)^{-1} F(x) (J = K + C(active set of x), the same step as plain
-Newton's) followed by the minimum of E on the line x + lam d, lam in (0, 1]. A step whose end keeps the
-active set of its start lies on one quadratic piece of E and is exact: it is taken in full, so on a level
-where the zone stays put this is plain Newton, step for step. E decreases at every step, so an active set
-is never revisited: no cycle, no watch and no fallback are needed. The stopping test is plain Newton's
+Newton's) followed by one of:
+
+- the full step, where its end keeps the active set of its start: it lies on one quadratic piece of E and is
+  exact (so on a level where the zone stays put this is plain Newton, step for step);
+- the full step, where its end has an active set not met before on this level, on the level's first
+  FREE_STEPS iterations (a zone that closes from nothing would otherwise grow by a point or two per damped
+  step) and later where it lowers ||F||;
+- otherwise the minimum of E on the line x + lam d, lam in (0, 1] (damped_newton._line_minimum).
+
+Full steps that change the active set go to distinct sets, so there are finitely many; between them E does not
+grow. So the iterates cannot cycle: no watch and no fallback are needed. The stopping test is plain Newton's
 (:class:`~newton.NewtonTest`, given the full Newton step |d|), so the level is solved to the same
 tolerance. Without an energy (the implicit memory term) the level is plain Newton's.
 """
