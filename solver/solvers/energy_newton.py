@@ -77,13 +77,15 @@ class EnergyNewtonSolver(NewtonSolver):
         problem.evaluate(x, F)
         out = DampedResult(R.ITERATING, 0, [F.norm()])
         self._seen: list[bytes] = []
+        self._at_trial = False  # x is the last trial point, where J and the active set were assembled
         snorm = 0.0
         for it in range(self.settings.max_it + 1):
             out.iterations = it
             out.reason = self.test(it, x.norm(), snorm, out.history[-1])
             if out.reason != R.ITERATING:
                 break
-            changed = problem.update_jacobian(x)
+            # after a full step J is already x's (assembled at the trial point): not assembled again
+            changed = False if self._at_trial else problem.update_jacobian(x)
             self._seen.append(problem.contact.fingerprint())  # x's active set
             if changed or self._stale or self.factorizations + out.factorizations == 0:
                 out.factorizations += 1  # J changed (or the run's first solve factors it)
@@ -108,6 +110,7 @@ class EnergyNewtonSolver(NewtonSolver):
         """x += lam d: the full step where it keeps the active set, or leads to an active set not met before
         on this level with a smaller residual; else lam minimizes E on the line."""
         problem = self.problem
+        self._at_trial = False
         slope = F.dot(d)  # phi'(0) of phi(lam) = E(x + lam d); < 0: a descent direction
         _along(y, 1.0, d, x, problem.bcs, self.iterative)
         changed = problem.update_jacobian(y)  # the active set at the full step (J kept if it is taken)
@@ -121,6 +124,7 @@ class EnergyNewtonSolver(NewtonSolver):
                     fpetsc.set_bc(x, problem.bcs)
                 return
         y.copy(x)
+        self._at_trial = True
 
     def _full_step_fits(self, y: PETSc.Vec, F: PETSc.Vec, fnorm: float) -> bool:
         """Whether the full step to y is taken though it changes the active set: y's set is new on this level
