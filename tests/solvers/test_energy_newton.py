@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from solver.config import load
 from solver.errors import ConfigError
@@ -46,8 +47,13 @@ def test_it_solves_the_cycling_levels_without_fallback_in_fewer_iterations(comm)
         assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-8, abs=1e-10)
         assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-8)
         assert a["zeta_norm"] == pytest.approx(b["zeta_norm"], rel=1e-8)
-    u, uref = model.u.x.array, ref_model.u.x.array
-    assert np.max(np.abs(u - uref)) <= 1e-8 * np.max(np.abs(uref))
+    if comm.size == 1:  # the same dof numbering: u itself
+        u, uref = model.u.x.array, ref_model.u.x.array
+        assert np.max(np.abs(u - uref)) <= 1e-8 * np.max(np.abs(uref))
+    else:  # two builds may partition differently: the norms of u
+        norm = PETSc.NormType
+        for kind in (norm.NORM_2, norm.NORM_INFINITY):
+            assert model.u.vector.norm(kind) == pytest.approx(ref_model.u.vector.norm(kind), rel=1e-9)
     # and the last level's residual, evaluated again, meets the tolerance
     problem = model.mech.problem
     scale = problem.begin_level(rows[-1]["t"])
