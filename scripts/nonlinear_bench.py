@@ -15,6 +15,7 @@ import argparse
 import csv
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -51,14 +52,16 @@ def run(src: Path, scene: str, sets: list[str], method: str | None, out: Path) -
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", type=Path, required=True, help="checkout of the baseline code")
-    ap.add_argument("--pairs", type=int, default=1, help="A B pairs per case (the first case gets this many)")
-    ap.add_argument("--cases", nargs="+", default=list(CASES))
+    ap.add_argument("--pairs", type=int, default=1, help="A B pairs of the first case")
+    ap.add_argument("--pairs-rest", type=int, default=1, help="A B pairs of the other cases")
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--name", default="nonlinear_method", help="the results' file stem in benchmarks/results")
     args = ap.parse_args()
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, name in enumerate(args.cases):
             scene, sets = CASES[name]
-            pairs = args.pairs if i == 0 else 1
+            pairs = args.pairs if i == 0 else args.pairs_rest
             a, b = [], []
             for p in range(pairs):
                 a.append(run(args.base, scene, sets, None, Path(tmp) / f"a{i}{p}"))
@@ -75,9 +78,9 @@ def main() -> None:
         for r in results.values():
             for x in r[side]:
                 x.pop("force")
-    (out / "nonlinear_method.json").write_text(json.dumps(results, indent=1))
+    (out / f"{args.name}.json").write_text(json.dumps(results, indent=1))
     lines = ["# Moving-contact levels: Newton (+ fallback) at the baseline against newton_energy",
-             "", f"`python scripts/nonlinear_bench.py --base {args.base} --pairs {args.pairs}`; "
+             "", f"`python scripts/nonlinear_bench.py {shlex.join(sys.argv[1:])}`; "
              f"{os.cpu_count()} cores, shared. Medians of the time loop (sum of wall_time), A B alternated.", "",
              "| case | method | ok | iterations | max/level | levels > 10 | factorizations | time loop (s) |",
              "|---|---|---|---|---|---|---|---|"]
@@ -89,7 +92,7 @@ def main() -> None:
                          f"{x['levels_over_10']} | {x['factorizations']} | {t:.2f} |")
         lines.append(f"| {name} | ratio, force diff | | | | | | {r['time_ratio']:.2f}, "
                      f"{r['force_max_rel_diff']:.1e} |")
-    (out / "nonlinear_method.md").write_text("\n".join(lines) + "\n")
+    (out / f"{args.name}.md").write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
