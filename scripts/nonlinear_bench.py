@@ -32,6 +32,8 @@ CASES = {
     "hard n=32 P1": ("hard.toml", ["mesh.nx=32", "mesh.ny=32"]),
     "hard n=16 P2 order 2": ("hard.toml", P2),
     "hard n=32 P2 order 2": ("hard.toml", [*P2, "mesh.nx=32", "mesh.ny=32"]),
+    "hard n=64 P1": ("hard.toml", ["mesh.nx=64", "mesh.ny=64"]),
+    "hard n=64 P2 order 2": ("hard.toml", [*P2, "mesh.nx=64", "mesh.ny=64"]),
 }
 
 
