@@ -45,6 +45,7 @@ NS = [8, 16]
 # label -> scene overrides; the damage variant is swept at the paper's mu only
 VARIANTS = {
     "newton": ["solver.method='newton'"],
+    "newton_energy": ["solver.method='newton_energy'"],
     "penalty_duality": ["solver.method='penalty_duality'"],
     "fixed_point": ["solver.method='fixed_point'"],
     "newton+semi_implicit_damage": ["solver.method='newton'", "solver.damage_scheme='semi_implicit'"],
@@ -171,6 +172,7 @@ def stability(args) -> int:
         if variants:
             groups.append((scene, 1e-10, variants, args.ns, args.ks, args.ref_n, args.ref_k, args.cache, args.max_it))
     rows = _run_groups(_stability_group, groups, args.jobs)
+    rows = _kept_rows(out / "stability.csv", rows)
     _write_csv(rows, out / "stability.csv")
     for path in _heatmaps(rows, out):
         print(path)
@@ -182,6 +184,19 @@ def stability(args) -> int:
         print(f"{label:32s} " + ", ".join(f"{k}: {v}" for k, v in sorted(c.items())))
     print(f"wrote {out / 'stability.csv'}")
     return 0
+
+
+def _kept_rows(path: Path, rows: list[dict]) -> list[dict]:
+    """The rows of ``path`` (an earlier run's CSV) that were not measured now, then the measured rows: a run of
+    some methods (or cells) adds or replaces their points without running the others again."""
+    if not path.exists():
+        return rows
+
+    def key(r: dict) -> tuple:
+        return r["scene"], r["method"], float(r["mu"]), int(r["n"]), float(r["k"])
+
+    measured = {key(r) for r in rows}
+    return [r for r in _read_rows(path) if key(r) not in measured] + rows
 
 
 def _wp_group(args: tuple) -> list[dict]:
@@ -208,10 +223,12 @@ def _read_rows(path: Path) -> list[dict]:
     def value(v: str):
         if v in ("True", "False"):
             return v == "True"
-        try:
-            return float(v)
-        except ValueError:
-            return v
+        for kind in (int, float):  # ints stay ints, so a CSV read and written again is unchanged
+            try:
+                return kind(v)
+            except ValueError:
+                pass
+        return v
 
     with open(path, newline="") as fh:
         return [{k: value(v) for k, v in r.items()} for r in csv.DictReader(fh)]
@@ -227,6 +244,7 @@ def _methods_part(args, out: Path) -> list[dict]:
     Reference(SCENES["example1"], args.ref_n, args.ref_k, args.ks, Path(args.cache), ["boundary.bottom.mu=1e-10"])
     groups = [("example1", [m], args.ns, args.ks, args.ref_n, args.ref_k, args.cache, 1e-10) for m in args.methods]
     rows = _run_groups(_wp_group, groups, args.jobs)
+    rows = _kept_rows(out / "work_precision.csv", rows)
     ok = [r for r in rows if r["status"] == "converged"]
     for key in ("error", "error_T"):
         front = set(pareto([(r["seconds"], r[key]) for r in ok]))
@@ -416,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--mus", type=float, nargs="+", default=MUS)
     st.add_argument("--ks", type=float, nargs="+", default=KS)
     st.add_argument("--ns", type=int, nargs="+", default=NS)
-    st.add_argument("--methods", nargs="+", default=["newton", "penalty_duality", "fixed_point",
+    st.add_argument("--methods", nargs="+", default=["newton", "newton_energy", "penalty_duality", "fixed_point",
                                                       "newton+semi_implicit_damage"], choices=list(VARIANTS))
     st.add_argument("--max-it", type=int, default=200, help="iteration limit per step, for every method")
     wp.add_argument("--ks", type=float, nargs="+", default=[0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001])

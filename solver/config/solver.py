@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
 
-METHODS = ("newton", "penalty_duality", "fixed_point")
+METHODS = ("newton", "newton_energy", "penalty_duality", "fixed_point")
+NEWTON_METHODS = ("newton", "newton_energy")  # Newton steps on J: any dimension, any linear solver, any memory rule
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
 LINEAR = ("auto", "petsc", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
@@ -63,18 +64,18 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
         degs[key] = integer(ctx, f"solver.{key}", t.get(key, auto[key]))
         need(ctx, f"solver.{key}", degs[key], 1 <= degs[key] <= 10, "must be in 1..10")
     has_contact = any(b.role == "contact" for b in scene["boundary"])
-    if linear == "iterative" and method != "newton":
+    if linear == "iterative" and method not in NEWTON_METHODS:
         # their loops factor one matrix once and re-solve it many times: a direct solve is what they need
         raise ctx.fail("solver.linear", linear, f"needs solver.method = 'newton' (not {method!r}); "
                        "use a direct solver: auto, petsc, mumps or redundant")
-    if method != "newton" and has_contact and scene["dim"] != 2:
+    if method not in NEWTON_METHODS and has_contact and scene["dim"] != 2:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
     power = [b.name for b in scene["boundary"] if b.role == "contact" and b.law == "power"]
     if method == "penalty_duality" and power:
         # its multiplier step needs the resolvent of p - omega I in closed form, and omega ~ a bound of p'
         raise ctx.fail("solver.method", method, f"does not support law 'power' (boundary.{power[0]}): p' is unbounded, "
                        "so no omega fits; use 'newton' or 'fixed_point'")
-    if scene["memory"].rule == "trapezoid" and method != "newton" and has_contact:
+    if scene["memory"].rule == "trapezoid" and method not in NEWTON_METHODS and has_contact:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:
         raise ctx.fail("solver.damage_scheme", damage_scheme, "is first order; time.order = 2 uses its own damage step")
