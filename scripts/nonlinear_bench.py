@@ -6,7 +6,7 @@ ratios of side-by-side medians mean something), and writes benchmarks/results/no
 total and largest per-level Newton iterations, levels above 10 iterations, factorizations, the time loop
 (the sum of wall_time) and the largest relative difference of the contact force over the levels.
 
-    python scripts/nonlinear_bench.py --base /work/base --pairs 2
+    python scripts/nonlinear_bench.py --base CHECKOUT_OF_e693721 --pairs 2
 """
 
 from __future__ import annotations
