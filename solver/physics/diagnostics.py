@@ -90,6 +90,7 @@ class DisplacementDiagnostics:
         self.traces = ContactTraces(geo, u, parts, degree) if parts else None
         self.parts = parts
         self._warned = False
+        self._table_errors = {part.name: interpolation_error(part) for part in parts}  # once, not in the loop
         self.peak_columns = ("peak_pressure",) + tuple(f"peak_pressure_{a}" for a in "xyz"[: geo.dim]) if parts else ()
         self.gram = None
         if strain_norm is None:
@@ -134,7 +135,7 @@ class DisplacementDiagnostics:
         value, x = self.traces.peak()
         if not self._warned and value > 0:
             self._warned = True
-            _warn_coarse_tables(self.parts, value)
+            _warn_coarse_tables(self.parts, self._table_errors, value)
         return dict(zip(self.peak_columns, (value, *(float(c) for c in x[: self.geo.dim]))))
 
     def row(self) -> dict[str, float]:
@@ -157,11 +158,11 @@ def allowed_penetration(part: BoundaryConfig, pressure: float) -> float:
     return r
 
 
-def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], pressure: float) -> None:
+def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], errors: dict[str, float], pressure: float) -> None:
     """One line per linear gap table whose interpolation error exceeds the penetration the law allows at the
     peak pressure: the body then follows the table's kinks (docs/contact.md)."""
     for part in parts:
-        err, allowed = interpolation_error(part), allowed_penetration(part, pressure)
+        err, allowed = errors[part.name], allowed_penetration(part, pressure)
         if err > allowed:
             logging.getLogger("solver").warning(
                 "warning: boundary.%s: the gap table's interpolation error (~%.2g) is %.0f times the penetration "

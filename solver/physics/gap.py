@@ -141,10 +141,16 @@ def _fill(part: BoundaryConfig, geo, degree: int) -> fem.Function:
     for f in geo.facets(part.name):
         c = int(f2c.links(f)[0])
         cells.setdefault(c, []).append(int(np.flatnonzero(c2f.links(c) == f)[0]))
+    refs, xs = [], []
     for c, local in cells.items():
         X = np.concatenate([on_facet[i] for i in local])
         xc = xg[gdofs.links(c)]
-        x = xc[0] + X @ (xc[1 : tdim + 1] - xc[0])  # affine simplices
-        coeffs = np.linalg.lstsq(_monomials(X, k), gap_values(part, x), rcond=None)[0]
+        refs.append(X)
+        xs.append(xc[0] + X @ (xc[1 : tdim + 1] - xc[0]))  # affine simplices
+    values = gap_values(part, np.concatenate(xs)) if xs else np.zeros(0)  # one pass over the table
+    start = 0
+    for c, X in zip(cells, refs):
+        coeffs = np.linalg.lstsq(_monomials(X, k), values[start : start + len(X)], rcond=None)[0]
+        start += len(X)
         g.x.array[W.dofmap.cell_dofs(c)] = nodes @ coeffs
     return g
