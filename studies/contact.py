@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -83,8 +84,7 @@ def figure(out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    import sys
-    sys.path.insert(0, str(ROOT / "tests" / "physics"))
+    sys.path.insert(0, str(ROOT / "tests" / "physics"))  # the closed form lives beside its test
     from test_curved_obstacle import A, E, exact_pressure_bottom, scene
 
     from solver.config import from_dict

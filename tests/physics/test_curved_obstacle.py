@@ -12,7 +12,6 @@ vertex next to a corner, where the bottom's and a side's contact meet, converges
 (docs/contact.md states the figures)."""
 
 import numpy as np
-import pytest
 
 from solver.config import from_dict
 from solver.run.model import build_model
