@@ -116,3 +116,32 @@ def test_bad_gaps_are_refused(bottom, key):
     with pytest.raises(ConfigError) as exc:
         from_dict({"boundary": {"left": {"role": "clamped"}, "bottom": {"role": "contact", **bottom}}})
     assert exc.value.key == key
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_obstacle_field_is_exact_at_the_quadrature_points(comm, dim):
+    """∫ (g_field − g)² ds = 0 with the contact rule, g the circle's (sphere's) distance written in UFL: the
+    field takes g's values at the very points FFCx integrates at, in 2-D and 3-D."""
+    shape, centre = ("circle", [0.4, -2.0]) if dim == 2 else ("sphere", [0.4, 0.3, -2.0])
+    mesh = {"nx": 6, "ny": 6} if dim == 2 else {"kind": "box", "corners": [[0, 0, 0], [1, 1, 1]], "nx": 3, "ny": 3,
+                                                "nz": 3}
+    extra = {"material": {"model": "3d"}} if dim == 3 else {}
+    cfg = from_dict({**STATIC, **extra, "mesh": mesh, "boundary": {
+        "top": {"role": "clamped"},
+        "bottom": {"role": "contact", "obstacle": {"shape": shape, "centre": centre, "radius": 2.0}}}})
+    model = build_model(cfg, comm)
+    part = model.cfg.boundaries[-1]
+    deg = model.cfg.solver.contact_quadrature_degree
+    x = ufl.SpatialCoordinate(model.geo.mesh)
+    c = ufl.as_vector(centre)
+    exact = ufl.sqrt(ufl.dot(x - c, x - c)) - 2.0
+    ds = model.geo.ds(model.geo.tags[part.name], metadata={"quadrature_degree": deg})
+    g = gap_function(part, model.geo, deg)
+    diff = comm.allreduce(fem.assemble_scalar(fem.form((g - exact) ** 2 * ds)), op=MPI.SUM)
+    size = comm.allreduce(fem.assemble_scalar(fem.form(exact**2 * ds)), op=MPI.SUM)
+    assert size > 0
+    assert diff <= 1e-26 * size
+    # and not merely close: the DG interpolant at its own nodes would be off by O(h^2) g''
+    off = comm.allreduce(fem.assemble_scalar(fem.form((g - exact) ** 2 * model.geo.ds(
+        model.geo.tags[part.name], metadata={"quadrature_degree": deg + 3}))), op=MPI.SUM)
+    assert off > 1e6 * diff
