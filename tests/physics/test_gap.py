@@ -145,3 +145,28 @@ def test_obstacle_field_is_exact_at_the_quadrature_points(comm, dim):
     off = comm.allreduce(fem.assemble_scalar(fem.form((g - exact) ** 2 * model.geo.ds(
         model.geo.tags[part.name], metadata={"quadrature_degree": deg + 3}))), op=MPI.SUM)
     assert off > 1e6 * diff
+
+
+def test_a_table_coarser_than_the_law_warns_in_one_line(caplog):
+    """The issue's case: g = x^2/2R (R = 1) every 0.002 under mu = 1e-8 at p = 2.8: error s^2/8 = 5e-7 is 18 times
+    mu p = 2.8e-8: one line; every 1e-5 (error 1.25e-11) nothing."""
+    from solver.config.boundary import BoundaryConfig
+    from solver.physics.diagnostics import _warn_coarse_tables, allowed_penetration
+
+    def part(ds, name):
+        s = np.arange(0.0, 0.3 + ds / 2, ds)
+        return BoundaryConfig(name, "contact", mu=1e-8, gap_table=tuple((a, a * a / 2) for a in s),
+                              gap_coordinate="x")
+
+    coarse, fine = part(0.002, "bottom"), part(1e-5, "side")
+    errors = {p.name: interpolation_error(p) for p in (coarse, fine)}
+    assert allowed_penetration(coarse, 2.8) == pytest.approx(2.8e-8)
+    assert interpolation_error(coarse) == pytest.approx(0.002**2 / 8, rel=1e-6)
+    with caplog.at_level("WARNING", logger="solver"):
+        _warn_coarse_tables((coarse, fine), errors, 2.8)
+    assert len(caplog.records) == 1 and "\n" not in caplog.records[0].getMessage()
+    assert "boundary.bottom" in caplog.records[0].getMessage() and "18 times" in caplog.records[0].getMessage()
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="solver"):
+        _warn_coarse_tables((fine,), errors, 2.8)
+    assert not caplog.records
