@@ -31,7 +31,7 @@ from solver.config.boundary import AXES
 
 def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
     """g at points x (n, 3 or gdim): the part's number, table or obstacle."""
-    x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    x = np.asarray(x, dtype=float)  # (n, 3) or (n, gdim); n may be 0 on a rank without the part
     if part.obstacle:
         return _obstacle(part, x)
     if not part.gap_table:
