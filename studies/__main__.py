@@ -1,13 +1,14 @@
-"""``python -m studies {bench,convergence,study} ...`` from the repository's root."""
+"""``python -m studies {bench,convergence,study,contact} ...`` from the repository's root."""
 
 from __future__ import annotations
 
 import sys
 
-USAGE = """usage: python -m studies {bench,convergence,study} ...
+USAGE = """usage: python -m studies {bench,convergence,study,contact} ...
 
   bench        time the loop of Example 1 and its parts (bench --help; bench --scaling: the 3-D scaling benchmark)
   convergence  the paper's Table 1: errors against a fine reference (convergence --help)
+  contact      a 10^5-row gap table against a constant gap (contact bench); the p(s) figure (contact figure)
   study        stability map, work-precision, orders, tolerance, estimator, Table 1 variants (study --help)
 """
 
@@ -25,6 +26,8 @@ def main(argv: list[str] | None = None) -> int:
         from studies.bench import main as run
     elif command == "convergence":
         from studies.convergence import main as run
+    elif command == "contact":
+        from studies.contact import main as run
     elif command == "study":
         from studies.study import main as run
     else:

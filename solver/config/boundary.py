@@ -15,6 +15,9 @@ FACE_AXIS = {"left": (0, 0), "right": (0, 1), "front": (1, 0), "back": (1, 1), "
 ROLES = ("clamped", "displacement", "traction", "contact")
 LAWS = ("linear", "power", "limited_penetration")
 AXES = ("x", "y", "z")
+INTERPOLATIONS = ("linear", "cubic")
+# analytic rigid obstacles (solver/physics/gap.py) and their keys
+OBSTACLES = {"plane": ("point", "normal"), "circle": ("centre", "radius"), "sphere": ("centre", "radius")}
 FREE = "free"
 # The paper's Example 1 boundary (docs/model.md §5), used when a scene gives none.
 PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
@@ -24,7 +27,7 @@ PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
 }
 # keys of a compliance law (beside law, gap and gap_coordinate)
 _LAW_KEYS = {"linear": ("mu",), "power": ("coefficient", "exponent"), "limited_penetration": ("mu", "depth", "mu_stiff")}
-_CONTACT_KEYS = ("gap", "gap_coordinate", "law", "mu", "coefficient", "exponent", "depth", "mu_stiff")
+_CONTACT_KEYS = ("gap", "gap_coordinate", "gap_interpolation", "obstacle", "law", "mu", "coefficient", "exponent", "depth", "mu_stiff")
 _PER_ROLE = {"clamped": (), "displacement": ("displacement",), "traction": ("traction",), "contact": _CONTACT_KEYS}
 _KEYS = ("role", "side", "interval", "traction", "displacement", *_CONTACT_KEYS)
 
@@ -65,7 +68,9 @@ class BoundaryConfig:
     rows (t, value) linear in t, or None for a free component (``clamped`` is all zeros).
 
     Contact: the gap is ``gap`` or, when ``gap_table`` holds rows (s, g), piecewise linear
-    in the coordinate ``gap_coordinate`` (held constant beyond the table). The compliance
+    in the coordinate ``gap_coordinate`` (held constant beyond the table; ``gap_interpolation``
+    = "cubic": a C² spline through the rows), or an analytic rigid ``obstacle`` (a plane, a
+    circle or a sphere; solver/physics/gap.py). The compliance
     law p(r) of -sigma_nu = p(u_nu - g):
 
     - ``linear``: p(r) = r_+ / mu (the paper's);
@@ -84,6 +89,8 @@ class BoundaryConfig:
     mu: float = 1e-10
     gap_table: tuple[tuple[float, float], ...] = ()
     gap_coordinate: str = ""
+    gap_interpolation: str = "linear"
+    obstacle: tuple[tuple[str, Any], ...] = ()  # (key, value) pairs: shape, point/normal or centre/radius
     law: str = "linear"
     coefficient: float = 0.0
     exponent: float = 1.0
@@ -282,14 +289,46 @@ def _contact(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig
              f"must be in (0, mu = {values['mu']}]: the foundation under the layer is the stiffer one")
         values.update(depth=depth, mu_stiff=mu_stiff)
     gap = b.get("gap", 0.0)
-    if isinstance(gap, list):
+    if "obstacle" in b:
+        if "gap" in b or "gap_coordinate" in b or "gap_interpolation" in b:
+            raise ctx.fail(f"{sec}.obstacle", b["obstacle"], "an obstacle replaces gap, gap_coordinate, gap_interpolation")
+        values["obstacle"] = _obstacle(ctx, f"{sec}.obstacle", b["obstacle"], dim)
+    elif isinstance(gap, list):
+        values["gap_interpolation"] = string(ctx, f"{sec}.gap_interpolation", b.get("gap_interpolation", "linear"),
+                                             INTERPOLATIONS)
         values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap)
         values["gap_coordinate"] = _gap_coordinate(ctx, sec, b, part, mesh, dim)
     else:
         values["gap"] = number(ctx, f"{sec}.gap", gap)
         if "gap_coordinate" in b:
             raise ctx.fail(f"{sec}.gap_coordinate", b["gap_coordinate"], "only with a gap table [[s, g], ...]")
+        if "gap_interpolation" in b:
+            raise ctx.fail(f"{sec}.gap_interpolation", b["gap_interpolation"], "only with a gap table [[s, g], ...]")
     return replace(part, **values)
+
+
+def _obstacle(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[str, Any], ...]:
+    """{shape = "plane", point, normal} or {shape = "circle" (2-D) | "sphere" (3-D), centre, radius}."""
+    if not isinstance(v, dict):
+        raise ctx.fail(key, v, "must be a table {shape = 'plane' | 'circle' | 'sphere', ...}")
+    shape = string(ctx, f"{key}.shape", v.get("shape"), tuple(OBSTACLES))
+    need(ctx, f"{key}.shape", shape, shape != ("sphere" if dim == 2 else "circle"),
+         "a circle is 2-D, a sphere 3-D")
+    check_keys(ctx, key, v, ("shape", *OBSTACLES[shape]))
+    out: list[tuple[str, Any]] = [("shape", shape)]
+    for name in OBSTACLES[shape]:
+        if name not in v:
+            raise ctx.fail(f"{key}.{name}", "<missing>", f"a {shape} needs " + ", ".join(OBSTACLES[shape]))
+        if name == "radius":
+            r = number(ctx, f"{key}.radius", v[name])
+            need(ctx, f"{key}.radius", r, r > 0, "must be > 0")
+            out.append((name, r))
+        else:
+            vec = vector(ctx, f"{key}.{name}", v[name], dim)
+            if name == "normal":
+                need(ctx, f"{key}.normal", list(vec), any(c != 0.0 for c in vec), "must not be zero")
+            out.append((name, vec))
+    return tuple(out)
 
 
 def _gap_table(ctx: Ctx, key: str, v: list) -> tuple[tuple[float, float], ...]:
@@ -357,8 +396,12 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
         if b.role == "displacement":
             entry["displacement"] = [_component_toml(c) for c in b.displacement]
         if b.role == "contact":
-            if b.gap_table:
+            if b.obstacle:
+                entry["obstacle"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in b.obstacle}
+            elif b.gap_table:
                 entry["gap"], entry["gap_coordinate"] = [list(r) for r in b.gap_table], b.gap_coordinate
+                if b.gap_interpolation != "linear":
+                    entry["gap_interpolation"] = b.gap_interpolation
             else:
                 entry["gap"] = b.gap
             entry["law"] = b.law

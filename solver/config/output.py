@@ -9,7 +9,8 @@ from .fields import Ctx, boolean, check_keys, integer, names, need, string
 
 # the fields a run can write (solver/io/fields.py says what each is)
 FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz",
-               "elastic_stress_zz")  # the last two: plane strain only (sigma_33), skipped elsewhere
+               "elastic_stress_zz",  # these two: plane strain only (sigma_33), skipped elsewhere
+               "contact_pressure", "gap", "penetration")  # vertex fields on Γ_C (zero off it); with contact only
 # what a ParaView user needs to warp the body and colour it as the paper does; the two tensors
 # (6 values per cell each) triple the bytes per level and are written only on request
 DEFAULT_FIELDS = ("displacement", "damage", "von_mises", "von_mises_elastic")

@@ -8,6 +8,11 @@ computed. The series itself is :class:`solver.io.xdmf.XDMFSeries`. P2 fields
 the mesh, their exact values at the vertices: ParaView shows the vertex values the solver
 computed and interpolates linearly in between.
 
+The contact results ``contact_pressure`` (λ_h, the discrete problem's pressure), ``gap`` (g) and
+``penetration`` (u_ν − g) are vertex fields of the whole mesh that are zero off Γ_C
+(:class:`solver.physics.contact_traces.ContactTraces`): one mesh in the file, so ParaView shows them
+over the deformed body with the rest, and its Extract Surface / threshold picks Γ_C.
+
 In plane strain the out-of-plane stress sigma_33 = lambda tr eps(u) + M_33 (docs/model.md
 §2) is part of the stress: the von Mises values include it, and ``stress_zz`` /
 ``elastic_stress_zz`` write it (requested in ``output.fields``; plane strain only).
@@ -29,7 +34,9 @@ from solver.physics.material import lame, strain, von_mises_array
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
          "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
-         "stress_zz": ("Cell", "Scalar"), "elastic_stress_zz": ("Cell", "Scalar")}
+         "stress_zz": ("Cell", "Scalar"), "elastic_stress_zz": ("Cell", "Scalar"), "contact_pressure": ("Node", "Scalar"),
+         "gap": ("Node", "Scalar"), "penetration": ("Node", "Scalar")}
+CONTACT_FIELDS = ("contact_pressure", "gap", "penetration")
 PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
 
 
@@ -131,8 +138,9 @@ class Outputs:
         self.d = mesh.geometry.dim
         self.series = None
         plane_strain = material.model == "plane_strain" and self.d == 2
+        traces = model.mech.diagnostics.traces
         self.names = [f for f in output.fields if (f != "damage" or model.damage is not None)
-                      and (f not in PLANE_STRAIN_ONLY or plane_strain)]
+                      and (f not in PLANE_STRAIN_ONLY or plane_strain) and (f not in CONTACT_FIELDS or traces)]
         if outdir is None or not self.names:
             return
         self.model = model
@@ -140,7 +148,11 @@ class Outputs:
         self._node_fields = {"displacement": _vertex_values(model.u)}
         if model.damage is not None:
             self._node_fields["damage"] = _vertex_values(model.damage.zeta)
-        self.stresses = CellStresses(model, material) if set(self.names) - {"displacement", "damage"} else None
+        if traces is not None:  # updated by the level's diagnostics
+            for name in CONTACT_FIELDS:
+                self._node_fields[name] = _vertex_values(getattr(traces, "pressure" if name == "contact_pressure" else name))
+        self.stresses = (CellStresses(model, material) if set(self.names) - {"displacement", "damage", *CONTACT_FIELDS}
+                         else None)
         specs = [FieldSpec(name, *KINDS[name]) for name in self.names]
         try:
             self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, keep_until)
@@ -174,7 +186,7 @@ class Outputs:
         for name in self.names:
             if name == "displacement":
                 values[name] = vector3(self.rows.rows(self._node_fields[name]()))
-            elif name == "damage":
+            elif name == "damage" or name in CONTACT_FIELDS:
                 values[name] = self.rows.rows(self._node_fields[name]())
             else:
                 values[name] = (tensor6(cells[name], self.d, cells.get(name + "_zz")) if name in ("stress", "elastic_stress")

@@ -2,7 +2,8 @@
 
 :func:`run` drives :func:`solver.run.stepper.levels` and writes what it yields:
 ``solution.xdmf`` + ``fields/`` (sigma_n = A eps(u_n) + M_n and the rest, :mod:`solver.io.fields`),
-``timeseries.csv`` (one row a level), ``config.toml`` (the resolved scene) and
+``timeseries.csv`` (one row a level), ``contact.csv`` (the contact results along Γ_C at each written
+level, :mod:`solver.io.contact_profile`; scenes with contact), ``config.toml`` (the resolved scene) and
 ``checkpoint.h5`` every ``output.checkpoint_every`` levels.
 """
 
@@ -15,6 +16,7 @@ from pathlib import Path
 from solver.config import dumps
 from solver.errors import OutputError, SolveFailure
 from solver.io import checkpoint
+from solver.io.contact_profile import ProfileWriter
 from solver.io.fields import Outputs
 from solver.io.files import on_rank0, write_text_atomic
 from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS, CSVWriter
@@ -47,6 +49,9 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
                + tuple(c for s in sensors for c in s.columns))
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
+    traces = model.mech.diagnostics.traces
+    profile = (ProfileWriter(outdir / "contact.csv", comm, traces, start - 1 if restart else None)
+               if outdir is not None and traces is not None else None)
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     rows: list[dict] = []
     finished = False
@@ -57,6 +62,8 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
                 t0 = time.perf_counter()
                 if writes_level(n, steps, cfg.output.every):
                     out.write(row["t"])
+                    if profile is not None:
+                        profile.write(n, row["t"])
                 row["time_output"] = time.perf_counter() - t0
                 row["wall_time"] += row["time_output"]
                 rows.append(row)

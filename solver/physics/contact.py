@@ -3,8 +3,8 @@
 The law p of each part (``law``): linear p(r) = r_+ / mu (the paper's), power p(r) = c r_+^m,
 or limited penetration p(r) = r_+ / mu + (r - d)_+ / mu_stiff. UFL differentiates
 ``max_value`` to the Heaviside, which is the semismooth Newton's generalized derivative
-(H(u_nu - g) / mu for the linear law). The gap is a number or piecewise linear in one
-coordinate, the same function here (UFL) and at the points (:func:`gap_values`).
+(H(u_nu - g) / mu for the linear law). The gap is a number, a table or an obstacle, the same values here
+(a field exact at the contact quadrature points) and at the points (:mod:`solver.physics.gap`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
-from solver.config.boundary import AXES
 from solver.mesh.geometry import Geometry
+from solver.physics.gap import gap_function, gap_values  # noqa: F401  (gap_values: re-exported)
 from solver.physics.operators import assemble_without_diagonal
 
 
@@ -41,31 +41,6 @@ def penetration(u, n, gap):
     return ufl.dot(u, n) - gap
 
 
-def gap_function(part: BoundaryConfig, mesh) -> float | ufl.core.expr.Expr:
-    """The part's gap: its number, or its table [s, g] as g_0 + sum of ramps clamped to [s_i, s_{i+1}]
-    (piecewise linear, constant beyond the table) in the coordinate ``gap_coordinate``."""
-    if not part.gap_table:
-        return part.gap
-    s = ufl.SpatialCoordinate(mesh)[AXES.index(part.gap_coordinate)]
-    rows = part.gap_table
-    g = rows[0][1]
-    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
-        g = g + (g1 - g0) / (s1 - s0) * (ufl.min_value(ufl.max_value(s, s0), s1) - s0)
-    return g
-
-
-def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
-    """:func:`gap_function` at points x (n, gdim): the same ramps in numpy."""
-    if not part.gap_table:
-        return np.full(len(x), part.gap)
-    s = x[:, AXES.index(part.gap_coordinate)]
-    rows = part.gap_table
-    g = np.full(len(x), rows[0][1])
-    for (s0, g0), (s1, g1) in zip(rows, rows[1:]):
-        g = g + (g1 - g0) / (s1 - s0) * (np.minimum(np.maximum(s, s0), s1) - s0)
-    return g
-
-
 def _ds(geo: Geometry, part: BoundaryConfig, degree: int):
     return geo.ds(geo.tags[part.name], metadata={"quadrature_degree": degree})
 
@@ -74,21 +49,21 @@ def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int
     """j(u, w) = sum over contact parts of int p(u_nu - g) w_nu ds."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
+        compliance(penetration(u, n, gap_function(p, geo, degree)), p) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
     )
 
 
 def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
     """Total normal contact force int p(u_nu - g) ds (a functional)."""
     n = ufl.FacetNormal(geo.mesh)
-    return sum(compliance(penetration(u, n, gap_function(p, geo.mesh)), p) * _ds(geo, p, degree) for p in parts)
+    return sum(compliance(penetration(u, n, gap_function(p, geo, degree)), p) * _ds(geo, p, degree) for p in parts)
 
 
 def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
     """Length (area) of the contact zone where u_nu - g > 0, at the facet quadrature points."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo.mesh)), 0.0), 1.0, 0.0) * _ds(geo, p, degree)
+        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo, degree)), 0.0), 1.0, 0.0) * _ds(geo, p, degree)
         for p in parts
     )
 

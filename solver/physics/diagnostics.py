@@ -1,4 +1,5 @@
-"""Per-level diagnostics of the displacement: contact force and zone, penetration, ||eps(u)||, reactions.
+"""Per-level diagnostics of the displacement: contact force and zone, penetration, the peak of the contact
+pressure λ_h and where it sits, ||eps(u)||, reactions.
 
 Functionals of the contact term are integrated with the same facet rule as the term
 itself; ||eps(u)||_L2 from the strain at the memory points where the scene has memory (that
@@ -8,6 +9,7 @@ the strain Gram matrix G assembled once.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 import numpy as np
@@ -21,7 +23,9 @@ from solver.config import BoundaryConfig
 from solver.mesh.geometry import Geometry
 from solver.physics import contact
 from solver.physics.contact_points import ContactPoints
+from solver.physics.contact_traces import ContactTraces
 from solver.physics.displacement import DisplacementProblem
+from solver.physics.gap import interpolation_error
 from solver.physics.material import strain
 
 
@@ -83,6 +87,11 @@ class DisplacementDiagnostics:
         self.has_contact = bool(parts)
         self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
         self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
+        self.traces = ContactTraces(geo, u, parts, degree) if parts else None
+        self.parts = parts
+        self._warned = False
+        self._table_errors = {part.name: interpolation_error(part) for part in parts}  # once, not in the loop
+        self.peak_columns = ("peak_pressure",) + tuple(f"peak_pressure_{a}" for a in "xyz"[: geo.dim]) if parts else ()
         self.gram = None
         if strain_norm is None:
             V = u.function_space
@@ -117,15 +126,49 @@ class DisplacementDiagnostics:
 
     @property
     def columns(self) -> tuple[str, ...]:
-        """The reaction columns (the fixed ones are io.CSV_COLUMNS)."""
-        return self.reactions.columns if self.reactions is not None else ()
+        """The peak pressure and the reaction columns (the fixed ones are io.CSV_COLUMNS)."""
+        return self.peak_columns + (self.reactions.columns if self.reactions is not None else ())
+
+    def peak(self) -> dict[str, float]:
+        """max λ_h over Γ_C and its point, after updating the contact traces (the fields the writer reads)."""
+        self.traces.update()
+        value, x = self.traces.peak()
+        if not self._warned and value > 0:
+            self._warned = True
+            _warn_coarse_tables(self.parts, self._table_errors, value)
+        return dict(zip(self.peak_columns, (value, *(float(c) for c in x[: self.geo.dim]))))
 
     def row(self) -> dict[str, float]:
         out = {"contact_force": self.contact_force(), "contact_length": self.contact_length(),
                "max_penetration": self.max_penetration(), "strain_norm": self.strain_norm()}
+        if self.traces is not None:
+            out.update(self.peak())
         if self.reactions is not None:
             out.update(self.reactions.row())
         return out
+
+
+def allowed_penetration(part: BoundaryConfig, pressure: float) -> float:
+    """The penetration r at which the part's law reaches ``pressure`` (p(r) = pressure; linear: mu p)."""
+    if part.law == "power":
+        return (pressure / part.coefficient) ** (1.0 / part.exponent)
+    r = part.mu * pressure
+    if part.law == "limited_penetration" and r > part.depth:  # p = r/mu + (r - d)/mu_s beyond the layer
+        r = (pressure + part.depth / part.mu_stiff) / (1.0 / part.mu + 1.0 / part.mu_stiff)
+    return r
+
+
+def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], errors: dict[str, float], pressure: float) -> None:
+    """One line per linear gap table whose interpolation error exceeds the penetration the law allows at the
+    peak pressure: the body then follows the table's kinks (docs/contact.md)."""
+    for part in parts:
+        err, allowed = errors[part.name], allowed_penetration(part, pressure)
+        if err > allowed:
+            logging.getLogger("solver").warning(
+                "warning: boundary.%s: the gap table's interpolation error (~%.2g) is %.0f times the penetration "
+                "its law allows at the peak pressure %.3g (%.2g): the pressure will follow the table's kinks; "
+                "sample it finer or set gap_interpolation = \"cubic\"", part.name, err, err / allowed, pressure,
+                allowed)
 
 
 class DamageDiagnostics:

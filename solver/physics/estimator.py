@@ -105,7 +105,7 @@ class ContactPressure(_Projection):
         qd = {} if contact_degree is None else {"quadrature_degree": contact_degree}
         # b is zero off Γ_C (the traces of those dofs' basis functions vanish); Jacobi-preconditioned CG on the
         # boundary mass matrix converges in a few tens of iterations
-        L = fem.form(sum(compliance(penetration(u, n, gap_function(p, mesh)), p) * psi
+        L = fem.form(sum(compliance(penetration(u, n, gap_function(p, geo, qd.get("quadrature_degree", 2))), p) * psi
                          * geo.ds(geo.tags[p.name], metadata=qd) for p in parts))
         self._init_solver(A, L, self.pressure, "jacobi")
 

@@ -5,7 +5,10 @@
   configuration (warp factor in the title), like the paper's Figs. 5 and 8, and
   ``von_mises_{initial,final}.png`` for the total stress sigma;
 - ``damage_final.png``: the damage at the final time (Figs. 6 and 9);
-- ``timeseries.png``: contact force, minimum damage and ||eps(u)|| against time.
+- ``timeseries.png``: contact force, minimum damage and ||eps(u)|| against time;
+- ``contact_<part>.png`` (scenes with contact, from ``contact.csv``): the pressure λ_h along the part at
+  the written times (up to six), the contact zone (u_ν > g) of the last one shaded, and below it the gap g
+  and the normal displacement u_ν at the last time.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from solver.post.results import read_csv, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
+from solver.post.results import read_csv, read_profile, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
 
 
 def _grid(res: dict, t: float, warp: float):
@@ -98,6 +101,43 @@ def timeseries(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
+def contact_profiles(profile: dict, out: Path) -> list[Path]:
+    """p(s) at the written levels per contact part (:func:`read_profile`'s dict), the last one's zone shaded."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    made = []
+    for part in sorted({name for _, name in profile}):
+        steps = sorted(step for step, name in profile if name == part)
+        picks = [steps[i] for i in np.unique(np.linspace(0, len(steps) - 1, min(6, len(steps))).round().astype(int))]
+        fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+        for step in picks:
+            p = profile[(step, part)]
+            top.plot(p["s"], p["pressure"], "-", label=f"t = {p['t'][0]:g}")
+        last = profile[(picks[-1], part)]
+        active = last["penetration"] > 0
+        if active.any():  # the zone of the last level: the span of its active nodes
+            top.axvspan(last["s"][active].min(), last["s"][active].max(), color="0.9", zorder=0,
+                        label="contact zone (last t)")
+        top.set_ylabel("contact pressure $\\lambda_h$")
+        top.set_title(f"boundary.{part}")
+        top.legend(fontsize=8)
+        bottom.plot(last["s"], last["gap"], "k-", label="gap g")
+        bottom.plot(last["s"], last["u_normal"], "--", label=f"$u_\\nu$ (t = {last['t'][0]:g})")
+        bottom.set_xlabel("s along the part")
+        bottom.legend(fontsize=8)
+        for ax in (top, bottom):
+            ax.grid(alpha=0.3)
+        fig.tight_layout()
+        path = out / f"contact_{part}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        made.append(path)
+    return made
+
+
 def plot_results(directory: str | Path, warp: float | None = None, out: str | Path | None = None,
                  extra_times: tuple[float, ...] = ()) -> list[Path]:
     """Write the PNGs of a results directory (plus von Mises at ``extra_times``); returns their paths."""
@@ -130,6 +170,8 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
         path = out / "timeseries.png"
         timeseries(read_csv(csv_path), path)
         made.append(path)
+    if (directory / "contact.csv").exists():
+        made += contact_profiles(read_profile(directory / "contact.csv"), out)
     return made
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import numpy as np
+
 
 def read_results(directory: str | Path) -> dict:
     """Read a results directory through ``solution.xdmf``: node coordinates (``geometry``), cells
@@ -24,3 +26,15 @@ def read_csv(path: str | Path) -> list[dict[str, float]]:
     """Read a timeseries.csv back as a list of rows of floats."""
     with open(path, newline="") as fh:
         return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+def read_profile(path: str | Path) -> dict[tuple[int, str], dict[str, np.ndarray]]:
+    """Read a contact.csv back: {(step, part): {column: values along the part}} (solver/io/contact_profile.py)."""
+    out: dict[tuple[int, str], dict[str, list[float]]] = {}
+    with open(path, newline="") as fh:
+        for row in csv.DictReader(fh):
+            cols = out.setdefault((int(row["step"]), row["part"]), {})
+            for k, v in row.items():
+                if k not in ("step", "part"):
+                    cols.setdefault(k, []).append(float(v))
+    return {key: {k: np.asarray(v) for k, v in cols.items()} for key, cols in out.items()}

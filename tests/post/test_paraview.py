@@ -31,10 +31,11 @@ def paraview():
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory, paraview):
-    """A tiny example-1 run: 6 x 6 mesh, times 0, 0.25, ..., 1."""
+    """A tiny example-1 run: 6 x 6 mesh, times 0, 0.25, ..., 1, with the contact results among the fields."""
     out = tmp_path_factory.mktemp("paraview") / "r"
+    fields = '["displacement", "damage", "von_mises", "von_mises_elastic", "contact_pressure", "gap", "penetration"]'
     run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
-           "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.25"]
+           "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.25", "--set", f"output.fields={fields}"]
     res = subprocess.run(run, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-2000:]
     return out
@@ -54,7 +55,7 @@ def test_paraview_renders_von_mises(results):
     assert times, res.stdout
     assert [float(t) for t in times.group(1).split(",")] == pytest.approx([0, 0.25, 0.5, 0.75, 1])
     names = set(re.findall(r"(\w+)\[\d+\]", res.stdout))
-    assert {"displacement", "damage", "von_mises", "von_mises_elastic"} <= names
+    assert {"displacement", "damage", "von_mises", "von_mises_elastic", "contact_pressure", "gap", "penetration"} <= names
     import matplotlib.image as mpimg
 
     img = mpimg.imread(png)

@@ -42,7 +42,7 @@ def test_plot_writes_pictures(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     names = {"von_mises_elastic_initial.png", "von_mises_elastic_final.png", "von_mises_initial.png",
-             "von_mises_final.png", "damage_final.png", "timeseries.png"}
+             "von_mises_final.png", "damage_final.png", "timeseries.png", "contact_bottom.png"}
     assert names <= {p.name for p in out.iterdir()}
     import matplotlib.image as mpimg
 
@@ -68,3 +68,22 @@ def test_plot_draws_3d_results(tmp_path):
     res = subprocess.run([sys.executable, "-m", "solver", "plot", str(out)], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-2000:]
     assert (out / "von_mises_final.png").stat().st_size > 10_000
+
+
+def test_contact_profiles_draw_the_pressure_along_each_part(tmp_path):
+    """p(s) per contact part at up to six written levels, from what read_profile returns."""
+    pytest.importorskip("matplotlib")
+    from solver.post.plots import contact_profiles
+
+    s = np.linspace(0.0, 1.0, 21)
+    profile = {}
+    for step in range(10):
+        pen = 1e-3 * (0.3 + 0.05 * step - s)
+        profile[(step, "bottom")] = {"t": np.full(21, 0.1 * step), "s": s, "gap": 0 * s, "u_normal": pen,
+                                     "penetration": pen, "pressure": np.maximum(pen, 0) * 1e4}
+    made = contact_profiles(profile, tmp_path)
+    assert [p.name for p in made] == ["contact_bottom.png"]
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(made[0])
+    assert img.shape[0] > 300 and np.unique(img.reshape(-1, img.shape[-1]), axis=0).shape[0] > 50

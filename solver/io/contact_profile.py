@@ -1,0 +1,46 @@
+"""``contact.csv``: the contact results along Γ_C at each written level, so that p(s) plots without ParaView.
+
+One row per node of the trace space on each contact part (the mesh's vertices for P1), in order along the
+part: ``s`` the arc length from its first node, the point, the gap g, the normal displacement u_ν, the
+penetration u_ν − g and the pressure λ_h (:class:`solver.physics.contact_traces.ContactTraces`). Rank 0
+writes; the nodes of every rank are gathered to it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mpi4py import MPI
+
+from solver.io.files import on_rank0, write_text_atomic
+from solver.physics.contact_traces import ContactTraces
+
+PROFILE_COLUMNS = ("step", "t", "part", "s", "x", "y", "z", "gap", "u_normal", "penetration", "pressure")
+
+
+class ProfileWriter:
+    """Appends each written level's profile to ``path``; ``keep_step`` (a restart) keeps the rows up to that step."""
+
+    def __init__(self, path: Path, comm: MPI.Comm, traces: ContactTraces, keep_step: int | None = None) -> None:
+        self.path, self.comm, self.traces = path, comm, traces
+
+        def start() -> None:
+            kept = []
+            if keep_step is not None and path.exists():
+                kept = [ln for ln in path.read_text().splitlines(keepends=True)[1:]
+                        if ln.endswith("\n") and int(ln.split(",", 1)[0]) <= keep_step]
+            write_text_atomic(path, ",".join(PROFILE_COLUMNS) + "\n" + "".join(kept))
+
+        on_rank0(comm, start)
+
+    def write(self, step: int, t: float) -> None:
+        """The profile of the current level (the traces as the level's diagnostics left them)."""
+        parts = self.traces.profile()  # collective
+
+        def append() -> None:
+            lines = [f"{step},{t!r},{name}," + ",".join(repr(float(v)) for v in row) + "\n"
+                     for name, rows in parts for row in rows]
+            with open(self.path, "a") as fh:
+                fh.write("".join(lines))
+
+        on_rank0(self.comm, append)

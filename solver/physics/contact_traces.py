@@ -1,0 +1,113 @@
+"""The contact results on Γ_C as fields (docs/contact.md): the pressure λ_h, the normal displacement, the gap
+and the penetration, in the traces on Γ_C of the degree-p Lagrange space (zero off Γ_C).
+
+λ_h is the discrete problem's own pressure (as the estimator's :class:`estimator.ContactPressure`):
+
+    (λ_h, ψ)_Γ_C = Σ_parts Σ_q p(u_ν − g)(x_q) ψ(x_q) w_q    for every trace ψ,
+
+the compliance at the contact term's quadrature points. Taking ψ = Σ_i ψ_i = 1 on Γ_C gives
+∫_Γ_C λ_h ds = the contact force of the discrete equations, exactly (to the CG tolerance). u_ν is
+the same projection of u·ν (exact for P1 on a straight part, where u·ν is P1 itself), g is the gap at
+the trace's nodes, and the penetration u_ν − g. The boundary mass matrix (1 on the diagonal off Γ_C)
+is assembled once: an update is two assemblies and two CG solves on the boundary dofs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from petsc4py import PETSc
+
+from solver.config import BoundaryConfig
+from solver.mesh.geometry import Geometry
+from solver.physics.contact import compliance, penetration
+from solver.physics.gap import gap_function, gap_values
+
+
+class ContactTraces:
+    """λ_h, u_ν, g and u_ν − g on Γ_C as functions of the degree-p Lagrange space (:meth:`update` per level)."""
+
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int) -> None:
+        mesh = geo.mesh
+        self.geo, self.parts, self.comm = geo, parts, geo.comm
+        p = u.function_space.ufl_element().degree()
+        S = fem.FunctionSpace(mesh, ("Lagrange", p))
+        self.pressure = fem.Function(S, name="contact_pressure")
+        self.normal_displacement = fem.Function(S, name="normal_displacement")
+        self.gap = fem.Function(S, name="gap")
+        self.penetration = fem.Function(S, name="penetration")
+        lam, psi = ufl.TrialFunction(S), ufl.TestFunction(S)
+        n = ufl.FacetNormal(mesh)
+        fdim = mesh.topology.dim - 1
+        x = S.tabulate_dof_coordinates()
+        self.x = x
+        n_local = S.dofmap.index_map.size_local
+        self.part_dofs = {}  # per part: its owned dofs
+        for part in parts:
+            dofs = fem.locate_dofs_topological(S, fdim, geo.facets(part.name))
+            self.gap.x.array[dofs] = gap_values(part, x[dofs])
+            self.part_dofs[part.name] = dofs[dofs < n_local]
+        self.on = np.unique(np.concatenate([fem.locate_dofs_topological(S, fdim, geo.facets(q.name)) for q in parts]))
+        off = np.setdiff1d(np.arange(len(x), dtype=np.int32), self.on).astype(np.int32)
+        zero = fem.Constant(mesh, 0.0)  # a cell term of zeros: every dof's diagonal is in the pattern
+        mass = sum(lam * psi * geo.ds(geo.tags[q.name], metadata={"quadrature_degree": 2 * p}) for q in parts)
+        A = fpetsc.assemble_matrix(fem.form(mass + zero * lam * psi * ufl.dx), bcs=[fem.dirichletbc(fem.Function(S), off)])
+        A.assemble()
+
+        def ds(q):
+            return geo.ds(geo.tags[q.name], metadata={"quadrature_degree": degree})
+
+        self.rhs = {
+            self.pressure: fem.form(sum(compliance(penetration(u, n, gap_function(q, geo, degree)), q) * psi * ds(q)
+                                        for q in parts)),
+            self.normal_displacement: fem.form(sum(ufl.dot(u, n) * psi * ds(q) for q in parts)),
+        }
+        self.b = fpetsc.create_vector(self.rhs[self.pressure])
+        self.ksp = PETSc.KSP().create(self.comm)
+        self.ksp.setOperators(A)
+        self.ksp.setType("cg")
+        self.ksp.getPC().setType("jacobi")
+        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
+
+    def update(self) -> None:
+        """λ_h and u_ν at the current u; the penetration u_ν − g on Γ_C."""
+        for target, form in self.rhs.items():
+            with self.b.localForm() as local:
+                local.set(0.0)
+            fpetsc.assemble_vector(self.b, form)
+            self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            self.ksp.solve(self.b, target.vector)
+            target.x.scatter_forward()
+        self.penetration.x.array[:] = 0.0
+        self.penetration.x.array[self.on] = self.normal_displacement.x.array[self.on] - self.gap.x.array[self.on]
+
+    def peak(self) -> tuple[float, np.ndarray]:
+        """The largest λ_h over Γ_C and the point where it sits (the same on every rank)."""
+        owned = np.concatenate(list(self.part_dofs.values()))
+        best = (-np.inf, np.zeros(3))
+        if len(owned):
+            i = owned[np.argmax(self.pressure.x.array[owned])]
+            best = (float(self.pressure.x.array[i]), self.x[i].copy())
+        value, x = max(self.comm.allgather(best), key=lambda b: b[0])
+        return value, x
+
+    def profile(self) -> list[tuple[str, np.ndarray]] | None:
+        """Per part on rank 0 (None elsewhere): rows (s, x, y, z, gap, u_ν, u_ν − g, λ_h) of its nodes in order
+        along the part (sorted by the coordinate that varies most; s the arc length from the first)."""
+        a = self.pressure.x.array
+        local = {name: np.column_stack([self.x[d], self.gap.x.array[d], self.normal_displacement.x.array[d],
+                                        self.penetration.x.array[d], a[d]]) for name, d in self.part_dofs.items()}
+        gathered = self.comm.gather(local, root=0)
+        if self.comm.rank != 0:
+            return None
+        out = []
+        for part in self.parts:
+            rows = np.concatenate([g[part.name] for g in gathered])
+            rows = rows[np.lexsort(rows[:, 2::-1].T)] if len(rows) else rows.reshape(0, 7)
+            axis = int(np.argmax(np.ptp(rows[:, :3], axis=0))) if len(rows) else 0
+            rows = rows[np.argsort(rows[:, axis], kind="stable")]
+            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(rows[:, :3], axis=0), axis=1))])
+            out.append((part.name, np.column_stack([s, rows])))
+        return out

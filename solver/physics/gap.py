@@ -1,0 +1,156 @@
+"""The gap g of a contact part as data: evaluated by numpy at points, and as a field that is g exactly at the
+contact quadrature points (docs/contact.md).
+
+g is one of
+- a number (``gap``);
+- a table of rows (s, g) in the coordinate ``gap_coordinate``, interpolated ``linear`` (piecewise linear,
+  the default) or ``cubic`` (a C² not-a-knot cubic spline through the rows), held constant beyond the table;
+- an analytic rigid obstacle (``obstacle``): a ``plane`` through ``point`` with unit ``normal`` pointing
+  into the body, g(x) = n·(x − p); a ``circle`` (2-D) or ``sphere`` (3-D) of ``radius`` R and ``centre`` c
+  outside which the body lies, g(x) = |x − c| − R: the signed distance from the point to the surface,
+  as Abaqus's analytical rigid surfaces measure it (closest point).
+
+In the UFL terms a non-constant g is a discontinuous Lagrange function of degree k, filled once per run:
+on each cell with a contact facet its values are the polynomial that takes g's values at the facet
+quadrature points (mapped as FFCx maps them: the reference facet's rule onto the reference cell's facet),
+so the form sees g exactly at its points, at a cost independent of the table's rows (a table used to be a
+UFL sum of one clamped ramp per row: 1,500 rows exceeded UFL's recursion limit).
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import basix
+import numpy as np
+from dolfinx import fem
+
+from solver.config import BoundaryConfig
+from solver.config.boundary import AXES
+
+
+def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
+    """g at points x (n, 3 or gdim): the part's number, table or obstacle."""
+    x = np.asarray(x, dtype=float)  # (n, 3) or (n, gdim); n may be 0 on a rank without the part
+    if part.obstacle:
+        return _obstacle(part, x)
+    if not part.gap_table:
+        return np.full(len(x), part.gap)
+    s = x[:, AXES.index(part.gap_coordinate)]
+    rows = np.asarray(part.gap_table, dtype=float)
+    if part.gap_interpolation == "cubic" and len(rows) > 2:
+        return _spline(part.gap_table)(np.clip(s, rows[0, 0], rows[-1, 0]))
+    return np.interp(s, rows[:, 0], rows[:, 1])  # constant beyond the ends, as the table was
+
+
+_SPLINES: dict = {}
+
+
+def _spline(table: tuple):
+    """The not-a-knot cubic spline through a table (built once per table)."""
+    from scipy.interpolate import CubicSpline
+
+    if table not in _SPLINES:
+        rows = np.asarray(table, dtype=float)
+        _SPLINES[table] = CubicSpline(rows[:, 0], rows[:, 1])
+    return _SPLINES[table]
+
+
+def _obstacle(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
+    """Signed distance from x to the obstacle's surface (> 0: apart)."""
+    ob = dict(part.obstacle)
+    d = x.shape[1]
+    if ob["shape"] == "plane":
+        p, n = np.zeros(d), np.zeros(d)
+        p[: len(ob["point"])], n[: len(ob["normal"])] = ob["point"], ob["normal"]
+        return (x - p) @ (n / np.linalg.norm(n))
+    c = np.zeros(d)
+    c[: len(ob["centre"])] = ob["centre"]
+    return np.linalg.norm(x - c, axis=1) - ob["radius"]
+
+
+def interpolation_error(part: BoundaryConfig) -> float:
+    """Largest deviation of the linear table from the cubic spline through its rows (an estimate of how far the
+    piecewise-linear table is from the smooth profile it samples, ~ max s_i² |g''| / 8); 0 if not a linear table."""
+    rows = np.asarray(part.gap_table, dtype=float)
+    if len(rows) < 4 or part.gap_interpolation != "linear" or part.obstacle:
+        return 0.0
+    mid = 0.5 * (rows[1:, 0] + rows[:-1, 0])
+    return float(np.max(np.abs(_spline(part.gap_table)(mid) - 0.5 * (rows[1:, 1] + rows[:-1, 1]))))
+
+
+def varying(part: BoundaryConfig) -> bool:
+    """Whether the part's gap depends on the point (a table or an obstacle)."""
+    return bool(part.gap_table) or bool(part.obstacle)
+
+
+_FIELDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def gap_function(part: BoundaryConfig, geo, degree: int) -> float | fem.Function:
+    """The part's gap for UFL: its number, or a DG field equal to g at the part's facet quadrature points of
+    ``degree`` (built once per mesh, part and degree)."""
+    if not varying(part):
+        return part.gap
+    cache = _FIELDS.setdefault(geo.mesh, {})
+    key = (part, degree)
+    if key not in cache:
+        cache[key] = _fill(part, geo, degree)
+    return cache[key]
+
+
+def _monomials(X: np.ndarray, k: int) -> np.ndarray:
+    """All monomials of total degree <= k at reference points X (n, tdim)."""
+    tdim = X.shape[1]
+    powers = [p for p in np.ndindex(*(k + 1,) * tdim) if sum(p) <= k]
+    return np.stack([np.prod(X ** np.array(p), axis=1) for p in powers], axis=1)
+
+
+def _field_degree(tdim: int, npts: int) -> int:
+    """A DG degree whose traces can take any values at one facet's npts points, with room for a second facet."""
+    if tdim == 2:
+        return npts
+    k = 1
+    while (k + 1) * (k + 2) // 2 < npts:
+        k += 1
+    return k + 1
+
+
+def _fill(part: BoundaryConfig, geo, degree: int) -> fem.Function:
+    """The DG field: per cell with facets of the part, the polynomial of least coefficients through g at their points."""
+    mesh = geo.mesh
+    tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
+    cell_type = {2: basix.CellType.triangle, 3: basix.CellType.tetrahedron}[tdim]
+    facet_type = {2: basix.CellType.interval, 3: basix.CellType.triangle}[tdim]
+    points, _ = basix.make_quadrature(facet_type, degree)
+    k = _field_degree(tdim, len(points))
+    W = fem.FunctionSpace(mesh, ("DG", k))
+    g = fem.Function(W, name=f"gap_{part.name}")
+    ref_vertices = basix.geometry(cell_type)
+    ref_facets = basix.topology(cell_type)[fdim]
+    on_facet = []  # the rule's points on each reference facet, in reference cell coordinates
+    for vs in ref_facets:
+        v = ref_vertices[vs]
+        on_facet.append(v[0] + points @ (v[1:] - v[0]))
+    nodes = _monomials(np.asarray(W.element.interpolation_points()), k)  # DG dof i = value at node i
+    mesh.topology.create_connectivity(fdim, tdim)
+    mesh.topology.create_connectivity(tdim, fdim)
+    f2c, c2f = mesh.topology.connectivity(fdim, tdim), mesh.topology.connectivity(tdim, fdim)
+    xg, gdofs = mesh.geometry.x, mesh.geometry.dofmap
+    cells: dict[int, list[int]] = {}
+    for f in geo.facets(part.name):
+        c = int(f2c.links(f)[0])
+        cells.setdefault(c, []).append(int(np.flatnonzero(c2f.links(c) == f)[0]))
+    refs, xs = [], []
+    for c, local in cells.items():
+        X = np.concatenate([on_facet[i] for i in local])
+        xc = xg[gdofs.links(c)]
+        refs.append(X)
+        xs.append(xc[0] + X @ (xc[1 : tdim + 1] - xc[0]))  # affine simplices
+    values = gap_values(part, np.concatenate(xs)) if xs else np.zeros(0)  # one pass over the table
+    start = 0
+    for c, X in zip(cells, refs):
+        coeffs = np.linalg.lstsq(_monomials(X, k), values[start : start + len(X)], rcond=None)[0]
+        start += len(X)
+        g.x.array[W.dofmap.cell_dofs(c)] = nodes @ coeffs
+    return g

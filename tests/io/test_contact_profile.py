@@ -1,0 +1,67 @@
+"""The contact results (issue 29): the pressure λ_h, the gap and the penetration as fields in solution.xdmf and
+along Γ_C in contact.csv, and the peak pressure in timeseries.csv. λ_h carries exactly the contact force of the
+discrete equations: its integral over Γ_C equals the ``contact_force`` column at every level, 1 and 2 ranks."""
+
+import numpy as np
+import pytest
+from conftest import solve
+
+from solver.config import from_dict
+from solver.post.results import read_csv, read_profile, read_results
+
+FIELDS = ["displacement", "contact_pressure", "gap", "penetration"]
+SCENES = {
+    # Example 1 (linear law, constant gap), every level written
+    "example1": {"mesh": {"nx": 16, "ny": 4}, "time": {"T": 0.3, "k": 0.1}},
+    # a body on a curved foundation given as a table, the power law, pulled down: the zone grows
+    "table": {"mesh": {"nx": 16, "ny": 4}, "time": {"T": 0.2, "k": 0.1}, "memory": {"kernel": "none"},
+              "boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [0.0, -20.0]},
+                           "bottom": {"role": "contact", "law": "power", "coefficient": 1e6, "exponent": 1.5,
+                                      "gap": [[0.0, 0.0], [0.33, 2e-4], [0.71, -1e-4], [1.0, 3e-4]]}}},
+}
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_pressure_integrates_to_the_contact_force(comm, shared_tmp, scene):
+    cfg = from_dict({**SCENES[scene], "output": {"every": 1, "fields": FIELDS}})
+    model, _ = solve(cfg, comm, shared_tmp)
+    if comm.rank != 0:
+        return
+    rows = read_csv(shared_tmp / "timeseries.csv")
+    profile = read_profile(shared_tmp / "contact.csv")
+    res = read_results(shared_tmp)
+    x = res["geometry"]
+    bottom = np.flatnonzero(np.abs(x[:, 1]) < 1e-12)
+    bottom = bottom[np.argsort(x[bottom, 0])]
+    part = model.cfg.boundaries[-1]
+    assert len(rows) == len(res["times"]) == 1 + model.cfg.time.steps
+    for row, t in zip(rows, res["times"]):
+        force = row["contact_force"]
+        assert force > 0
+        p = profile[(int(row["step"]), "bottom")]
+        assert np.array_equal(p["x"], x[bottom, 0])  # every node of the part, in order
+        # lambda_h is P1 along the straight part: the trapezoidal rule integrates it exactly
+        assert np.trapz(p["pressure"], p["s"]) == pytest.approx(force, rel=1e-8)
+        field = res["fields"]["contact_pressure"][t]
+        assert np.trapz(field[bottom], x[bottom, 0]) == pytest.approx(force, rel=1e-8)
+        assert np.all(np.delete(field, bottom) == 0.0)  # zero off the contact part
+        assert row["peak_pressure"] == p["pressure"].max()
+        assert row["peak_pressure_x"] == p["x"][np.argmax(p["pressure"])]
+        # the penetration is u_nu - g with nu = -e_y, exact at the vertices for P1 on a straight part
+        u = res["fields"]["displacement"][t]
+        gap = np.interp(x[bottom, 0], *np.array(part.gap_table).T) if part.gap_table else np.full(len(bottom), part.gap)
+        assert np.allclose(res["fields"]["gap"][t][bottom], gap, rtol=0, atol=1e-15)
+        scale = np.abs(u[bottom, 1]).max()
+        assert np.allclose(res["fields"]["penetration"][t][bottom], -u[bottom, 1] - gap, rtol=0, atol=1e-9 * scale)
+        assert np.allclose(p["penetration"], res["fields"]["penetration"][t][bottom], rtol=0, atol=1e-9 * scale)
+
+
+def test_no_contact_fields_without_contact(comm, shared_tmp):
+    """A scene without a contact part writes neither contact.csv nor the contact fields (asked for or not)."""
+    cfg = from_dict({"mesh": {"nx": 4, "ny": 2}, "time": {"T": 0.1, "k": 0.1}, "output": {"fields": FIELDS},
+                     "boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [0.0, -1.0]}}})
+    solve(cfg, comm, shared_tmp)
+    if comm.rank == 0:
+        assert not (shared_tmp / "contact.csv").exists()
+        assert set(read_results(shared_tmp)["fields"]) == {"displacement"}
+        assert "peak_pressure" not in read_csv(shared_tmp / "timeseries.csv")[0]
