@@ -36,6 +36,9 @@ MEANING: dict[str, str] = {
                                   "or \"free\"",
     "boundary.NAME.gap": "initial gap g to the foundation (role contact): a number, or rows [s, g] along gap_coordinate",
     "boundary.NAME.gap_coordinate": "the coordinate (x, y or z) a tabulated gap is a function of",
+    "boundary.NAME.gap_interpolation": "how a gap table is read between its rows: linear, or a C2 cubic spline for curved profiles",
+    "boundary.NAME.obstacle": "an analytic rigid obstacle instead of a gap: {shape = plane, point, normal} or "
+                              "{shape = circle | sphere, centre, radius}; g is the signed distance to it",
     "boundary.NAME.law": "the normal-compliance law p in -sigma_nu = p(u_nu - g)",
     "boundary.NAME.mu": "compliance of the linear law, p(r) = r_+ / mu (the paper's: 1e-10, nearly rigid)",
     "boundary.NAME.coefficient": "power law: p(r) = coefficient r_+^exponent",
@@ -95,7 +98,7 @@ MEANING: dict[str, str] = {
 CHOICES: dict[str, tuple] = {
     "mesh.kind": ("rectangle", "box", "gmsh"), "mesh.diagonal": mesh.DIAGONALS,
     "boundary.NAME.role": boundary.ROLES, "boundary.NAME.law": boundary.LAWS,
-    "boundary.NAME.gap_coordinate": boundary.AXES, "boundary.NAME.side": boundary.BOX_FACES,
+    "boundary.NAME.gap_coordinate": boundary.AXES, "boundary.NAME.gap_interpolation": boundary.INTERPOLATIONS, "boundary.NAME.side": boundary.BOX_FACES,
     "material.model": material.MODELS, "discretization.u_degree": DEGREES, "discretization.zeta_degree": DEGREES,
     "time.order": (1, 2), "memory.kernel": memory.KERNELS, "memory.rule": memory.RULES,
     "solver.linear": solver.LINEAR, "solver.method": solver.METHODS, "solver.damage_scheme": solver.DAMAGE_SCHEMES,
