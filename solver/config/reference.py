@@ -98,7 +98,8 @@ MEANING: dict[str, str] = {
 CHOICES: dict[str, tuple] = {
     "mesh.kind": ("rectangle", "box", "gmsh"), "mesh.diagonal": mesh.DIAGONALS,
     "boundary.NAME.role": boundary.ROLES, "boundary.NAME.law": boundary.LAWS,
-    "boundary.NAME.gap_coordinate": boundary.AXES, "boundary.NAME.gap_interpolation": boundary.INTERPOLATIONS, "boundary.NAME.side": boundary.BOX_FACES,
+    "boundary.NAME.gap_coordinate": boundary.AXES, "boundary.NAME.side": boundary.BOX_FACES,
+    "boundary.NAME.gap_interpolation": boundary.INTERPOLATIONS,
     "material.model": material.MODELS, "discretization.u_degree": DEGREES, "discretization.zeta_degree": DEGREES,
     "time.order": (1, 2), "memory.kernel": memory.KERNELS, "memory.rule": memory.RULES,
     "solver.linear": solver.LINEAR, "solver.method": solver.METHODS, "solver.damage_scheme": solver.DAMAGE_SCHEMES,
