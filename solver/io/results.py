@@ -12,8 +12,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from mpi4py import MPI
+
 from solver.config import dumps
-from solver.errors import OutputError, SolveFailure
+from solver.errors import Interrupted, OutputError, SolveFailure
 from solver.io import checkpoint
 from solver.io.fields import Outputs
 from solver.io.files import on_rank0, write_text_atomic
@@ -23,7 +25,7 @@ from solver.run.stepper import levels, writes_level
 
 
 def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
-        restart: bool = False, sensors: tuple = ()) -> list[dict]:
+        restart: bool = False, sensors: tuple = (), stop: Callable[[], int] | None = None) -> list[dict]:
     """Run the model's scene; write results to ``outdir`` (None: nothing written). Returns the rows.
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
@@ -32,6 +34,10 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     an OutputError that knows the step; what was written before stays readable.
 
     ``sensors``: as for :func:`solver.run.stepper.levels`; their columns go to the CSV too.
+
+    ``stop``: asked after every level (a signal's number, 0 to go on; the ranks agree by a max-reduction):
+    when it answers, the run ends there as if that level were the last written one (series, CSV, and a
+    checkpoint of that level) and raises :class:`Interrupted`, which ``--restart`` continues.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
@@ -50,7 +56,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
     every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
     rows: list[dict] = []
-    finished = False
+    finished, interrupted = False, None
     try:
         for row in levels(model, start, sensors):
             n = row["step"]
@@ -70,6 +76,10 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
                 raise _located(exc, n, row["t"], cfg.time.k) from None
             if on_step is not None:
                 on_step(row)
+            signum = comm.allreduce(stop(), op=MPI.MAX) if stop is not None and n < steps else 0
+            if signum:
+                interrupted = _stop_here(out, outdir, model, n, row["t"], part, signum)
+                break
         try:
             out.close()
         except SolveFailure as exc:
@@ -79,7 +89,18 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         out.close(quiet=not finished)
         if csv is not None:
             csv.close()
+    if interrupted is not None:
+        raise interrupted
     return rows
+
+
+def _stop_here(out: Outputs, outdir: Path | None, model: Model, n: int, t: float, part: int,
+               signum: int) -> Interrupted:
+    """End an interrupted run at level n: the series written up to it and a checkpoint of it."""
+    out.flush()
+    if outdir is not None:
+        checkpoint.write(outdir, model, n, t, part)
+    return Interrupted(signum, n, t, outdir is not None)
 
 
 def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:

@@ -126,6 +126,7 @@ def _gmsh(comm: MPI.Comm, cfg: MeshConfig, gdim: int):
     from dolfinx.io import gmshio
 
     names: dict[str, int] = {}
+    domain = True
     if comm.rank == 0:
         gmsh.initialize()
         gmsh.option.setNumber("General.Terminal", 0)
@@ -133,7 +134,15 @@ def _gmsh(comm: MPI.Comm, cfg: MeshConfig, gdim: int):
         gmsh.merge(cfg.file)
         for dim, tag in gmsh.model.getPhysicalGroups(dim=gdim - 1):
             names[gmsh.model.getPhysicalName(dim, tag) or str(tag)] = tag
-    names = comm.bcast(names, root=0)
+        # gmshio takes the cells from the physical groups of dimension gdim: without one it fails deep inside
+        domain = bool(gmsh.model.getPhysicalGroups(dim=gdim))
+        if not domain:
+            gmsh.finalize()
+    names, domain = comm.bcast((names, domain), root=0)
+    if not domain:
+        raise ConfigError(f"mesh.file = {cfg.file!r}: the mesh has no physical group of dimension {gdim} (the body's "
+                          f"cells, named 'domain' in meshes/README.md); add one, and one of dimension {gdim - 1} for "
+                          "each boundary part")
     try:
         msh, _, ft = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     finally:
