@@ -86,8 +86,9 @@ def _written(outdir: Path) -> list[Path]:
     return found
 
 
-def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool) -> None:
-    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError."""
+def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool, dry: bool = False) -> None:
+    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError.
+    ``dry``: only the refusals, nothing made or removed (before a long planning that may refuse the tolerance)."""
     import tempfile
 
     problem = None
@@ -105,12 +106,12 @@ def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool
                                     for p in existing})
                     problem = (f"--output {outdir}: holds earlier results ({', '.join(names)}); "
                                "pass --overwrite to replace them, --restart to continue them, or choose another directory")
-                elif existing:
+                elif existing and not dry:
                     for target in existing:
                         target.unlink()
                     if (outdir / "fields").is_dir() and not any((outdir / "fields").iterdir()):
                         (outdir / "fields").rmdir()
-            if problem is None:
+            if problem is None and not dry:
                 outdir.mkdir(parents=True, exist_ok=True)
                 tempfile.TemporaryFile(dir=outdir).close()  # can we write in it? (mode bits do not tell root)
         except OSError as exc:
@@ -295,10 +296,11 @@ def cmd_run(args, comm: MPI.Comm) -> int:
         if clash:
             raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "
                              "the mesh size, the step, the degree and the order); drop one of them")
-        _prepare_output(comm, outdir, args.overwrite, args.restart)
+        _prepare_output(comm, outdir, args.overwrite, args.restart, dry=True)
         log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
         formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
         plan = make_plan(cfg, comm, log=log.info)
+        _prepare_output(comm, outdir, args.overwrite, args.restart)  # only now: a refused tolerance makes nothing
         cfg = plan.config
         model = build_model(cfg, comm, plan.geo)
         sensors = (ErrorSensor(model, plan),)

@@ -5,7 +5,7 @@ Callers decide by type and fields, never by the message text:
 - :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
   scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
   line and the results directory, :class:`ToleranceError` for a tolerance out of reach
-  (``tolerance``, ``estimate``, ``dofs``, ``limit``), :class:`RigidMotionError` for supports that
+  (``tolerance``, ``estimate``, ``dofs``, ``limit``, ``predicted``), :class:`RigidMotionError` for supports that
   leave a rigid motion free (``motions``).
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
   (filled in by the stepper, :meth:`SolveFailure.at`), and a ``status`` word for studies:
@@ -72,10 +72,14 @@ class ToleranceError(InputError):
     ``tolerance`` (the user's, absolute), or above ``target``, the part of it one error term was given;
     ``limit`` names the setting that stopped it."""
 
-    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str, target: float | None = None) -> None:
+    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str, target: float | None = None,
+                 predicted: float | None = None) -> None:
         self.tolerance, self.estimate, self.dofs, self.limit, self.target = tolerance, estimate, dofs, limit, target
+        self.predicted = predicted  # the dofs the tolerance would need, predicted before refining (None: found)
         part = "" if target is None else f" against its part {target:.3g}"
-        super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit} "
+        need = "" if predicted is None else (f": it would need about {predicted:.3g} displacement dofs (predicted "
+                                             "from the estimate's rate on the start mesh)")
+        super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit}{need} "
                          f"(estimate {estimate:.3g}{part} at {dofs} displacement dofs)")
 
 

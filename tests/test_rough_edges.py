@@ -162,3 +162,14 @@ def test_progress_in_a_log_is_a_line_every_ten_percent(tmp_path):
     lines = [ln for ln in text.splitlines() if "%" in ln and "level" in ln]
     assert 9 <= len(lines) <= 11 and lines[-1].startswith("100% level 101/101"), text
     assert os.path.getsize(tmp_path / "log") < 4000
+
+
+def test_a_tolerance_out_of_reach_is_refused_at_once_with_nothing_written(tmp_path):
+    """Item 2: --tolerance 1e-9 ran 10 minutes to 8.7 GB; with max_dofs it refused after 21 s but left an empty
+    output directory. The planner's prediction refuses it after the start meshes, before the directory is made."""
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example1.toml", "--tolerance", "1e-9", "--output", str(out), "--no-progress"])
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-3000:]
+    err = [ln for ln in res.stderr.splitlines() if ln.startswith("error")]
+    assert len(err) == 1 and "cannot be reached within accuracy.max_dofs: it would need about" in err[0], res.stderr
+    assert not out.exists()
