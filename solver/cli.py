@@ -280,7 +280,7 @@ def cmd_run(args, comm: MPI.Comm) -> int:
         raise UsageError(f"--output {args.output!r}: empty; give a directory (or leave --output out to use the "
                          f"scene's output.directory = {cfg.output.directory!r})")
     outdir = Path(cfg.output.directory if args.output is None else args.output)
-    if args.restart:
+    if args.restart and not cfg.accuracy.enabled:  # (a tolerance's scene is known after planning: checked then)
         _same_scene(comm, cfg, outdir)  # before anything is printed or built
     # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
     from solver.io.results import run
@@ -302,6 +302,8 @@ def cmd_run(args, comm: MPI.Comm) -> int:
         plan = make_plan(cfg, comm, log=log.info)
         _prepare_output(comm, outdir, args.overwrite, args.restart)  # only now: a refused tolerance makes nothing
         cfg = plan.config
+        if args.restart:
+            _same_scene(comm, cfg, outdir)
         model = build_model(cfg, comm, plan.geo)
         sensors = (ErrorSensor(model, plan),)
         _write_plan(comm, outdir, plan, model)
