@@ -251,8 +251,10 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     if size > WARN_OUTPUT_BYTES:
         log.warning("warning: a run writes about %.1f GB (%d levels at output.every = %d): raise output.every, or "
                     "leave fields out with output.fields", size / 1e9, levels, cfg.output.every)
-    log.info("%s: ok — %s; u P%d, zeta P%d, %d steps of k = %g (order %d)", args.config, " + ".join(physics),
-             disc.u_degree, disc.zeta_degree, cfg.time.steps, cfg.time.k, cfg.time.order)
+    if comm.rank == 0:  # the answer goes to stdout (warnings and errors to stderr)
+        print(f"{args.config}: ok — {' + '.join(physics)}; u P{disc.u_degree}, zeta P{disc.zeta_degree}, "
+              f"{cfg.time.steps} steps of k = {cfg.time.k:g} (order {cfg.time.order}); writes about "
+              f"{size / 1e6:.3g} MB ({levels} levels)")
     return 0
 
 

@@ -38,7 +38,7 @@ def test_incompatible_interval_refused_before_output(tmp_path):
 @pytest.mark.slow
 def test_check_and_no_overwrite(tmp_path):
     res = cli(["check", "configs/example1.toml"])
-    assert res.returncode == 0 and "ok" in res.stderr
+    assert res.returncode == 0 and ": ok — " in res.stdout and res.stderr == ""
     out = tmp_path / "o"
     assert cli(["run", "configs/example1.toml", "--output", str(out), *SMALL]).returncode == 0
     before = (out / "timeseries.csv").read_bytes()

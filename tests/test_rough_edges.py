@@ -173,3 +173,34 @@ def test_a_tolerance_out_of_reach_is_refused_at_once_with_nothing_written(tmp_pa
     err = [ln for ln in res.stderr.splitlines() if ln.startswith("error")]
     assert len(err) == 1 and "cannot be reached within accuracy.max_dofs: it would need about" in err[0], res.stderr
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def constant_damage(tmp_path_factory):
+    """A small run whose damage is zeta* = 0.01 everywhere at every level (as results/hard at T)."""
+    out = tmp_path_factory.mktemp("plot") / "o"
+    res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL, "--set", "time.T=0.2",
+               "--set", "damage.zeta0=0.01"])
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def test_plot_is_quiet_draws_a_constant_field_readably_and_refuses_times_outside(constant_damage, tmp_path):
+    """Items 12-14: a constant field was all black with hidden ticks; every plot printed VTK's yellow X-server
+    warning; --times beyond T silently drew the last level."""
+    pytest.importorskip("pyvista")
+    import numpy as np
+    from PIL import Image
+
+    pics = tmp_path / "p"
+    res = cli(["plot", str(constant_damage), "--output", str(pics)])
+    assert res.returncode == 0 and res.stderr == "", res.stderr  # item 13: no VTK warning, no ANSI colours
+    img = np.asarray(Image.open(pics / "damage_final.png").convert("RGB"), dtype=float)
+    h, w, _ = img.shape
+    body = img[int(0.3 * h):int(0.7 * h), int(0.25 * w):int(0.55 * w)]
+    assert body.mean() > 60  # item 12: not black (magma's low end)
+    line = _one_error_line(cli(["plot", str(constant_damage), "--output", str(tmp_path / "q"), "--times", "5"]))
+    assert line == "error: --times 5: outside the written levels, which span [0, 0.2]" and not (tmp_path / "q").exists()
+    res = cli(["plot", str(constant_damage), "--output", str(tmp_path / "r"), "--times", "0.123"])
+    assert res.returncode == 0 and "drawn at the nearest written level, t = 0.1" in res.stderr
+    assert (tmp_path / "r" / "von_mises_t0_1.png").exists()
