@@ -125,6 +125,8 @@ def call_cli(argv: list[str]) -> tuple[int, str, str]:
             code = main(argv)
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 2
+        except Exception as exc:  # what a user would see as a traceback
+            raise Defect(f"solver {argv!r}: traceback: {type(exc).__name__}: {exc}"[:2000]) from exc
     return code, out.getvalue(), err.getvalue()
 
 

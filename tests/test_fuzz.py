@@ -49,3 +49,10 @@ def test_fuzzed_command_lines(argv):
         finally:
             os.chdir(cwd)
     check_one_line(code, err, f"solver {argv!r}")
+
+
+def test_a_scene_path_too_long_is_one_line():
+    """Found by the campaign: a 300-character file name was an OSError traceback (File name too long)."""
+    code, _, err = call_cli(["check", "a" * 300])
+    check_one_line(code, err, "check aaa...")
+    assert code == 2 and "cannot read the scene file (File name too long)" in err

@@ -159,9 +159,12 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
 def load(path: str | Path, overrides: list[str] | None = None) -> Config:
     """Read, override and validate a scene file."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such scene file")
-    text = path.read_bytes()
+    try:
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such scene file")
+        text = path.read_bytes()
+    except OSError as exc:  # a name too long, a directory without permission (found by the fuzzer)
+        raise ConfigError(f"{str(path)[:200]}: cannot read the scene file ({exc.strerror or exc})") from None
     try:
         data = tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError:
