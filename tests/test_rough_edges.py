@@ -204,3 +204,12 @@ def test_plot_is_quiet_draws_a_constant_field_readably_and_refuses_times_outside
     res = cli(["plot", str(constant_damage), "--output", str(tmp_path / "r"), "--times", "0.123"])
     assert res.returncode == 0 and "drawn at the nearest written level, t = 0.1" in res.stderr
     assert (tmp_path / "r" / "von_mises_t0_1.png").exists()
+
+
+def test_study_help_says_what_each_study_is():
+    """Item 17: 'study --help' called itself 'stability map and work-precision chart', most options without help."""
+    res = cli(["study", "--help"])
+    assert res.returncode == 0 and "Table 1 variants, tolerance runs" in " ".join(res.stdout.split())
+    res = cli(["study", "stability", "--help"])
+    text = " ".join(res.stdout.split())
+    assert "mesh (n cells across) of the fine reference" in text and "runs in parallel" in text

@@ -88,7 +88,7 @@ def render(res: dict, field: str, t: float, warp: float, path: Path, title: str,
     p.add_text(f"{title}\nt = {t:g}, displacement x {warp:g} (grey: undeformed)", font_size=11)
     if solid:
         p.view_isometric()
-        p.camera.zoom(1.1)
+        p.camera.zoom(0.9)  # the whole body, clear of the colour bar at the right
     else:
         p.view_xy()
         p.camera.zoom(1.1)
