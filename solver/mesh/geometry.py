@@ -55,7 +55,7 @@ class Geometry:
 
         self.mesh.topology.create_connectivity(fdim, 0)
         nodes = entities_to_geometry(self.mesh._mesh, fdim, facets.astype(np.int32), False)  # the C++ mesh (0.5.2)
-        x = self.mesh.geometry.x[nodes.reshape(-1)].reshape(len(facets), -1, 3)
+        x = self.mesh.geometry.x[nodes.reshape(-1)].reshape(len(facets), fdim + 1, 3)  # (a rank may own none)
         if fdim == 1:
             size = np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
         else:

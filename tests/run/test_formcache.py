@@ -32,6 +32,7 @@ def test_a_module_not_in_the_memo_is_looked_up_on_disk(monkeypatch):
     assert ("libffcx_forms_not_compiled_yet", ("form_x",), "/nonexistent") not in formcache._found
 
 
+@pytest.mark.serial  # starts its own process
 @pytest.mark.xfail(strict=True, reason="issue 32 item 15, not finished: on a cold cache the first build compiles the "
                    "explicit damage step's right-hand side under another signature than the second build (found, not "
                    "yet explained); measure's per-mesh form and the memo of compiled modules are fixed")
