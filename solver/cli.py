@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import logging
+import signal
 import sys
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from mpi4py import MPI
 
 from solver import __version__
 from solver.config import load
-from solver.errors import InputError, SolveFailure, UsageError
+from solver.errors import InputError, Interrupted, SolveFailure, UsageError
 from solver.run import formcache
 
 log = logging.getLogger("solver")
@@ -53,7 +54,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--tolerance", metavar="TOL",
                    help="bound on the paper's error norm (accuracy.tolerance): the solver chooses mesh, degree and step")
     mode = r.add_mutually_exclusive_group()
-    mode.add_argument("--overwrite", action="store_true", help="replace earlier results in the output directory")
+    mode.add_argument("--overwrite", action="store_true",
+                      help="replace earlier results in the output directory: removes only the files a run writes "
+                           "(" + ", ".join(RESULT_FILES) + ", fields/mesh.h5, fields/levels_*.h5); anything else "
+                           "there is kept")
     mode.add_argument("--restart", action="store_true",
                       help="continue the run in the output directory from its last checkpoint")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -68,13 +72,23 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
+RESULT_FILES = ("solution.xdmf", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
                 "mesh.h5")
+FIELD_FILES = ("mesh.h5", "levels_*.h5")  # what the series writes in fields/ (solver/io/xdmf.py)
 
 
-def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool) -> None:
-    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError."""
-    import shutil
+def _written(outdir: Path) -> list[Path]:
+    """The files of outdir that a run writes (and --overwrite removes): nothing else there is touched."""
+    found = [outdir / f for f in RESULT_FILES if (outdir / f).is_file()]
+    fields = outdir / "fields"
+    if fields.is_dir():
+        found += sorted(p for pattern in FIELD_FILES for p in fields.glob(pattern) if p.is_file())
+    return found
+
+
+def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool, dry: bool = False) -> None:
+    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError.
+    ``dry``: only the refusals, nothing made or removed (before a long planning that may refuse the tolerance)."""
     import tempfile
 
     problem = None
@@ -86,15 +100,18 @@ def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool
                 if not (outdir / "checkpoint.h5").exists():
                     problem = f"--restart: {outdir / 'checkpoint.h5'} does not exist (nothing to restart from)"
             elif outdir.is_dir():
-                existing = [f for f in RESULT_FILES if (outdir / f).exists()]
+                existing = _written(outdir)
                 if existing and not overwrite:
-                    problem = (f"--output {outdir}: holds earlier results ({', '.join(existing)}); "
+                    names = sorted({str(p.relative_to(outdir).parent / "") if p.parent.name == "fields" else p.name
+                                    for p in existing})
+                    problem = (f"--output {outdir}: holds earlier results ({', '.join(names)}); "
                                "pass --overwrite to replace them, --restart to continue them, or choose another directory")
-                elif existing:
-                    for f in existing:
-                        target = outdir / f
-                        shutil.rmtree(target) if target.is_dir() else target.unlink()
-            if problem is None:
+                elif existing and not dry:
+                    for target in existing:
+                        target.unlink()
+                    if (outdir / "fields").is_dir() and not any((outdir / "fields").iterdir()):
+                        (outdir / "fields").rmdir()
+            if problem is None and not dry:
                 outdir.mkdir(parents=True, exist_ok=True)
                 tempfile.TemporaryFile(dir=outdir).close()  # can we write in it? (mode bits do not tell root)
         except OSError as exc:
@@ -104,21 +121,105 @@ def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool
         raise UsageError(problem)
 
 
+def _same_scene(comm: MPI.Comm, cfg, outdir: Path) -> None:
+    """Refuse a restart whose scene differs from the checkpoint's, naming the first key that differs."""
+    problem = None
+    if comm.rank == 0:
+        import h5py
+
+        from solver.io.checkpoint import NAME, scene_hash
+
+        path = outdir / NAME
+        try:
+            with h5py.File(path, "r") as h5:
+                stored = h5.attrs["scene"]
+        except (OSError, KeyError):
+            stored = None  # missing or unreadable: _prepare_output and checkpoint.read say so
+        if stored is not None and stored != scene_hash(cfg):
+            problem = f"--restart: the scene differs from the one that wrote {path}"
+            key = _first_difference(cfg, outdir / "config.toml")
+            problem += (f" at {key}" if key else "") + " (only [output] may change)"
+    problem = comm.bcast(problem, root=0)
+    if problem:
+        raise UsageError(problem)
+
+
+def _first_difference(cfg, written: Path) -> str | None:
+    """The first key (dotted, [output] left out) where cfg differs from the resolved scene in ``written``, with both
+    values; None if that file is missing or unreadable."""
+    import tomllib
+
+    from solver.config import to_dict
+    from solver.errors import show
+
+    try:
+        old = tomllib.loads(written.read_text())
+    except (OSError, ValueError):
+        return None
+
+    def walk(a, b, prefix: str) -> str | None:
+        if isinstance(a, dict) and isinstance(b, dict):
+            for key in list(a) + [k for k in b if k not in a]:
+                if prefix + key == "output":
+                    continue
+                found = walk(a.get(key), b.get(key), f"{prefix}{key}.")
+                if found:
+                    return found
+            return None
+        if a != b:
+            return f"{prefix.rstrip('.')} = {show(a)} (the checkpoint's run had {show(b)})"
+        return None
+
+    return walk(to_dict(cfg), old, "")
+
+
 def _progress(comm: MPI.Comm, steps: int, enabled: bool):
     if comm.rank != 0 or not enabled:
         return None, lambda row: None
+    if not sys.stderr.isatty():
+        return None, _log_lines(steps)
     from tqdm import tqdm
 
-    # a live bar on a terminal; in logs (no TTY) a line every 10 % instead of redraws
-    tty = sys.stderr.isatty()
-    bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr,
-               mininterval=0.2 if tty else 0.0, miniters=None if tty else max(1, (steps + 1) // 10))
+    bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr, mininterval=0.2)
 
     def update(row: dict) -> None:
         bar.set_postfix_str(f"t={row['t']:.4g} newton={row['newton_iterations']} zeta_min={row['zeta_min']:.4f}", refresh=False)
         bar.update(1)
 
     return bar, update
+
+
+def _log_lines(steps: int):
+    """Progress for a log (stderr not a terminal): one whole line every 10 % of the levels, no redraws."""
+    total, done = steps + 1, [0]
+
+    def update(row: dict) -> None:
+        before, done[0] = done[0], done[0] + 1
+        if done[0] * 10 // total > before * 10 // total or done[0] == total:
+            log.info("%3d%% level %d/%d: t=%.4g newton=%d zeta_min=%.4f", 100 * done[0] // total, done[0], total,
+                     row["t"], row["newton_iterations"], row["zeta_min"])
+
+    return update
+
+
+WARN_OUTPUT_BYTES = 2 * 1024**3  # check warns above this estimate of a run's output
+
+
+def _output_estimate(cfg, geo) -> tuple[int, int]:
+    """(levels written, bytes) a run of cfg writes: each written level holds every chosen field (cells or nodes
+    times components at the output precision) and every level a CSV row of about 400 bytes."""
+    from solver.run.stepper import writes_level
+
+    d, steps = cfg.dim, cfg.time.steps
+    levels = sum(writes_level(n, steps, cfg.output.every) for n in range(steps + 1)) if cfg.output.xdmf else 0
+    nodes = geo.mesh.topology.index_map(0).size_global
+    cells = geo.mesh.topology.index_map(d).size_global
+    comps = {"Vector": 3, "Scalar": 1, "Tensor6": 6}
+    from solver.io.fields import KINDS
+
+    per_level = sum((nodes if KINDS[f][0] == "Node" else cells) * comps[KINDS[f][1]] for f in cfg.output.fields)
+    width = 4 if cfg.output.precision == "single" else 8
+    return levels, levels * per_level * width + 400 * (steps + 1)
 
 
 def cmd_check(args, comm: MPI.Comm) -> int:
@@ -146,8 +247,14 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     if cfg.damage.enabled:
         physics.append("damage")
     disc = cfg.discretization
-    log.info("%s: ok — %s; u P%d, zeta P%d, %d steps of k = %g (order %d)", args.config, " + ".join(physics),
-             disc.u_degree, disc.zeta_degree, cfg.time.steps, cfg.time.k, cfg.time.order)
+    levels, size = _output_estimate(cfg, geo)
+    if size > WARN_OUTPUT_BYTES:
+        log.warning("warning: a run writes about %.1f GB (%d levels at output.every = %d): raise output.every, or "
+                    "leave fields out with output.fields", size / 1e9, levels, cfg.output.every)
+    if comm.rank == 0:  # the answer goes to stdout (warnings and errors to stderr)
+        print(f"{args.config}: ok — {' + '.join(physics)}; u P{disc.u_degree}, zeta P{disc.zeta_degree}, "
+              f"{cfg.time.steps} steps of k = {cfg.time.k:g} (order {cfg.time.order}); writes about "
+              f"{size / 1e6:.3g} MB ({levels} levels)")
     return 0
 
 
@@ -171,42 +278,76 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     import time
 
     cfg = _scene(args)
-    outdir = Path(args.output or cfg.output.directory)
+    if args.output is not None and not args.output.strip():
+        raise UsageError(f"--output {args.output!r}: empty; give a directory (or leave --output out to use the "
+                         f"scene's output.directory = {cfg.output.directory!r})")
+    outdir = Path(cfg.output.directory if args.output is None else args.output)
+    if args.restart and not cfg.accuracy.enabled:  # (a tolerance's scene is known after planning: checked then)
+        _same_scene(comm, cfg, outdir)  # before anything is printed or built
     # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
     from solver.io.results import run
     from solver.run.model import build_model
 
-    plan, sensors = None, ()
     start = time.perf_counter()
     if cfg.accuracy.enabled:
-        from solver.run.accuracy import ErrorSensor, contradicting
-        from solver.run.accuracy import plan as make_plan
-
-        clash = contradicting(args.overrides)
-        if clash:
-            raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "
-                             "the mesh size, the step, the degree and the order); drop one of them")
-        _prepare_output(comm, outdir, args.overwrite, args.restart)
-        log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
-        formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
-        plan = make_plan(cfg, comm, log=log.info)
-        cfg = plan.config
-        model = build_model(cfg, comm, plan.geo)
-        sensors = (ErrorSensor(model, plan),)
-        _write_plan(comm, outdir, plan, model)
+        cfg, model, plan, sensors = _planned(args, comm, cfg, outdir)
     else:
+        plan, sensors = None, ()
         model = build_model(cfg, comm)
         _prepare_output(comm, outdir, args.overwrite, args.restart)
     log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
              comm.size)
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
+    stop = _StopOnSignal()
     try:
-        rows = run(model, outdir, on_step=update, restart=args.restart, sensors=sensors)
-    finally:
+        rows = run(model, outdir, on_step=update, restart=args.restart, sensors=sensors, stop=stop)
+    except Interrupted as exc:
         if bar is not None:
             bar.close()
+        import shlex
+
+        how = shlex.join(["python", "-m", "solver", "run", args.config, "--output", str(outdir),
+                          *(a for o in args.overrides for a in ("--set", o)), "--restart"])
+        log.info("stopped by %s at the end of step %d (t = %g): results and a checkpoint up to there in %s; "
+                 "continue with: %s", signal.Signals(exc.signal).name, exc.step, exc.t, outdir, how)
+        return 128 + exc.signal
+    finally:
+        stop.restore()
+        if bar is not None:
+            bar.close()
+    _report(rows, time.perf_counter() - start, plan, sensors, model, outdir)
+    return 0
+
+
+def _planned(args, comm: MPI.Comm, cfg, outdir: Path):
+    """``--tolerance``: plan the scene (nothing is made before the plan is accepted), then build its model and the
+    error sensor, and write plan.json and mesh.xdmf. Returns (the planned scene, model, plan, sensors)."""
+    from solver.run.accuracy import ErrorSensor, contradicting
+    from solver.run.accuracy import plan as make_plan
+    from solver.run.model import build_model
+
+    clash = contradicting(args.overrides)
+    if clash:
+        raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "
+                         "the mesh size, the step, the degree and the order); drop one of them")
+    _prepare_output(comm, outdir, args.overwrite, args.restart, dry=True)
+    log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
+    formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
+    plan = make_plan(cfg, comm, log=log.info)
+    _prepare_output(comm, outdir, args.overwrite, args.restart)  # only now: a refused tolerance makes nothing
+    cfg = plan.config
+    if args.restart:
+        _same_scene(comm, cfg, outdir)
+    model = build_model(cfg, comm, plan.geo)
+    sensors = (ErrorSensor(model, plan),)
+    _write_plan(comm, outdir, plan, model)
+    return cfg, model, plan, sensors
+
+
+def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdir: Path) -> None:
+    """The closing lines of a run: where it ended, the tolerance's estimate, where the results are."""
     last = rows[-1]
-    log.info("done in %.1f s: t = %g, zeta_min = %.6g, contact force = %.6g", time.perf_counter() - start,
+    log.info("done in %.1f s: t = %g, zeta_min = %.6g, contact force = %.6g", seconds,
              last["t"], last["zeta_min"], last["contact_force"])
     if plan is not None:
         worst = sensors[0].worst
@@ -217,7 +358,31 @@ def cmd_run(args, comm: MPI.Comm) -> int:
             log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
                      "mesh was too small); run again with a smaller tolerance")
     log.info("results in %s (solution.xdmf for ParaView, timeseries.csv, config.toml)", outdir)
-    return 0
+
+
+class _StopOnSignal:
+    """SIGINT (Ctrl-C) and SIGTERM (a scheduler's warning before the time limit) ask the run to stop at the end
+    of the current level (:func:`solver.io.results.run`'s ``stop``); a second one stops at once. mpirun kills
+    its ranks on SIGINT/SIGTERM itself but forwards SIGUSR1: under mpirun send SIGUSR1 to mpirun, or the
+    signal to the ranks (as a batch scheduler does)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)
+
+    def __init__(self) -> None:
+        self.signum = 0
+        self.previous = {s: signal.signal(s, self._handle) for s in self.SIGNALS}
+
+    def _handle(self, signum: int, frame) -> None:
+        if self.signum:
+            raise KeyboardInterrupt  # the second: now (main() reports it in one line)
+        self.signum = signum
+
+    def __call__(self) -> int:
+        return self.signum
+
+    def restore(self) -> None:
+        for s, handler in self.previous.items():
+            signal.signal(s, handler)
 
 
 def _write_plan(comm: MPI.Comm, outdir: Path, plan, model) -> None:
@@ -275,3 +440,8 @@ def main(argv: list[str] | None = None) -> int:
         if comm.rank == 0:
             print(f"failed: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        if comm.rank == 0:
+            print("stopped at once (a second interrupt): the results up to the last checkpoint are kept; "
+                  "continue with --restart", file=sys.stderr)
+        return 128 + signal.SIGINT

@@ -5,7 +5,8 @@ Callers decide by type and fields, never by the message text:
 - :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
   scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
   line and the results directory, :class:`ToleranceError` for a tolerance out of reach
-  (``tolerance``, ``estimate``, ``dofs``, ``limit``).
+  (``tolerance``, ``estimate``, ``dofs``, ``limit``, ``predicted``), :class:`RigidMotionError` for supports that
+  leave a rigid motion free (``motions``).
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
   (filled in by the stepper, :meth:`SolveFailure.at`), and its ``kind`` in one word (diverged,
   stagnated, too_many_iterations, damage_failed, non_finite, output_failed, singular), by which a
@@ -73,11 +74,27 @@ class ToleranceError(InputError):
     ``tolerance`` (the user's, absolute), or above ``target``, the part of it one error term was given;
     ``limit`` names the setting that stopped it."""
 
-    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str, target: float | None = None) -> None:
+    def __init__(self, tolerance: float, estimate: float, dofs: int, limit: str, target: float | None = None,
+                 predicted: float | None = None) -> None:
         self.tolerance, self.estimate, self.dofs, self.limit, self.target = tolerance, estimate, dofs, limit, target
+        self.predicted = predicted  # the dofs the tolerance would need, predicted before refining (None: found)
         part = "" if target is None else f" against its part {target:.3g}"
-        super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit} "
+        need = "" if predicted is None else (f": it would need about {predicted:.3g} displacement dofs (predicted "
+                                             "from the estimate's rate on the start mesh)")
+        super().__init__(f"accuracy.tolerance = {tolerance:.3g} cannot be reached within {limit}{need} "
                          f"(estimate {estimate:.3g}{part} at {dofs} displacement dofs)")
+
+
+# ----------------------------------------------------------------------------- interruption
+
+
+class Interrupted(CampoError):
+    """A run stopped on a signal (SIGINT, SIGTERM) at the end of level ``step`` (time ``t``), its results and a
+    checkpoint written up to there; ``signal`` is the signal's number (the exit code is 128 + it)."""
+
+    def __init__(self, signal: int, step: int, t: float, checkpoint: bool) -> None:
+        self.signal, self.step, self.t, self.checkpoint = signal, step, t, checkpoint
+        super().__init__(f"stopped at step {step}, t = {t:.6g}")
 
 
 # ----------------------------------------------------------------------------- run failures
@@ -154,12 +171,14 @@ class OutputError(SolveFailure):
         super().__init__(f"writing results failed: {reason}")
 
 
-class RigidMotionError(SolveFailure):
-    """The Dirichlet parts leave a rigid motion free, so the stiffness matrix is singular (found before solving)."""
+class RigidMotionError(InputError):
+    """The Dirichlet parts leave a rigid motion free, so the stiffness matrix is singular (found before solving).
+
+    Bad input (the scene's supports), not a failed run: exit code 2 like any other scene mistake."""
 
     kind = "singular"
 
     def __init__(self, motions: list[str]) -> None:
         self.motions = list(motions)
-        super().__init__("the Dirichlet parts leave a rigid motion free (" + "; ".join(self.motions) + "): "
+        super().__init__("boundary: the Dirichlet parts leave a rigid motion free (" + "; ".join(self.motions) + "): "
                          "the stiffness matrix is singular; fix more displacement components")

@@ -412,15 +412,20 @@ def _usage(parse):
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m studies study", description="stability map and work-precision chart")
+    p = argparse.ArgumentParser(prog="python -m studies study",
+                                description="the studies behind the published figures: stability map, work-precision "
+                                            "chart, orders, estimator, Table 1 variants, tolerance runs")
     sub = p.add_subparsers(dest="which", required=True)
+    helps = {"stability": "where each displacement method fails, over mu, k and two meshes (a heat map per method)",
+             "work-precision": "error against wall time per method and discretization",
+             "orders": "the observed orders in h and in k"}
     for name, ref_n in (("stability", 32), ("work-precision", 128), ("orders", 128)):
-        s = sub.add_parser(name)
-        s.add_argument("--output", default=str(ROOT / "benchmarks" / "results"))
-        s.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache"))
-        s.add_argument("--ref-n", type=int, default=ref_n)
-        s.add_argument("--ref-k", type=float, default=0.0005)
-        s.add_argument("--jobs", type=int, default=2)
+        s = sub.add_parser(name, help=helps[name])
+        s.add_argument("--output", default=str(ROOT / "benchmarks" / "results"), help="where the CSV and charts go")
+        s.add_argument("--cache", default=str(ROOT / "benchmarks" / "cache"), help="cached reference runs")
+        s.add_argument("--ref-n", type=int, default=ref_n, help="mesh (n cells across) of the fine reference")
+        s.add_argument("--ref-k", type=float, default=0.0005, help="time step of the fine reference")
+        s.add_argument("--jobs", type=int, default=2, help="runs in parallel")
     st, wp, od = sub.choices["stability"], sub.choices["work-precision"], sub.choices["orders"]
     for parser in (wp, od):  # the discretization series and their P2 / order 2 reference
         parser.add_argument("--disc-ref-n", type=int, default=256)

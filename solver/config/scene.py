@@ -159,9 +159,12 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
 def load(path: str | Path, overrides: list[str] | None = None) -> Config:
     """Read, override and validate a scene file."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: no such scene file")
-    text = path.read_bytes()
+    try:
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such scene file")
+        text = path.read_bytes()
+    except OSError as exc:  # a name too long, a directory without permission (found by the fuzzer)
+        raise ConfigError(f"{str(path)[:200]}: cannot read the scene file ({exc.strerror or exc})") from None
     try:
         data = tomllib.loads(text.decode("utf-8"))
     except UnicodeDecodeError:
@@ -171,7 +174,25 @@ def load(path: str | Path, overrides: list[str] | None = None) -> Config:
     if not data:
         raise ConfigError(f"{path}: the scene file is empty (a scene needs at least one section)")
     data = apply_overrides(data, overrides or [])
-    return from_dict(data, source=str(path), base=path.parent.resolve())
+    try:
+        return from_dict(data, source=str(path), base=path.parent.resolve())
+    except ConfigError as exc:
+        item = _override_of(exc.key, overrides or [])
+        if item is None:
+            raise
+        # the value came from the command line, not the file: say so
+        raise ConfigError(source=f"--set {item}", key=exc.key, value=exc.value, allowed=exc.allowed) from None
+
+
+def _override_of(key: str, overrides: list[str]) -> str | None:
+    """The last ``--set`` that wrote ``key`` (or a table holding it, or a key inside it), if any."""
+    if not key:
+        return None
+    for item in reversed(overrides):
+        path = ".".join(parse_override(item)[0])
+        if path == key or key.startswith(path + ".") or path.startswith(key + "."):
+            return item
+    return None
 
 
 def replace(cfg: Config, changes: dict, label: str = "replace()") -> Config:

@@ -13,8 +13,10 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from mpi4py import MPI
+
 from solver.config import dumps
-from solver.errors import OutputError, SolveFailure
+from solver.errors import Interrupted, OutputError, SolveFailure
 from solver.io import checkpoint
 from solver.io.contact_profile import ProfileWriter
 from solver.io.fields import Outputs
@@ -25,7 +27,7 @@ from solver.run.stepper import levels, writes_level
 
 
 def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
-        restart: bool = False, sensors: tuple = ()) -> list[dict]:
+        restart: bool = False, sensors: tuple = (), stop: Callable[[], int] | None = None) -> list[dict]:
     """Run the model's scene; write results to ``outdir`` (None: nothing written). Returns the rows.
 
     With ``restart``, the state is loaded from ``outdir``'s checkpoint and the run continues
@@ -34,6 +36,10 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     an OutputError that knows the step; what was written before stays readable.
 
     ``sensors``: as for :func:`solver.run.stepper.levels`; their columns go to the CSV too.
+
+    ``stop``: asked after every level (a signal's number, 0 to go on; the ranks agree by a max-reduction):
+    when it answers, the run ends there as if that level were the last written one (series, CSV, and a
+    checkpoint of that level) and raises :class:`Interrupted`, which ``--restart`` continues.
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
@@ -43,49 +49,83 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
         if comm.rank == 0:
             keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
-    if outdir is not None:
-        on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
-    out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
-    columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
-               + tuple(c for s in sensors for c in s.columns))
-    csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
-    traces = model.mech.diagnostics.traces
-    profile = (ProfileWriter(outdir / "contact.csv", comm, traces, start - 1 if restart else None)
-               if outdir is not None and traces is not None else None)
-    every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
+    writers = _Writers(model, outdir, sensors, keep, keep_until, start - 1 if restart else None)
     rows: list[dict] = []
-    finished = False
+    finished, interrupted = False, None
     try:
         for row in levels(model, start, sensors):
             n = row["step"]
             try:
-                t0 = time.perf_counter()
-                if writes_level(n, steps, cfg.output.every):
-                    out.write(row["t"])
-                    if profile is not None:
-                        profile.write(n, row["t"])
-                row["time_output"] = time.perf_counter() - t0
-                row["wall_time"] += row["time_output"]
+                writers.level(row)
                 rows.append(row)
-                if csv is not None:
-                    on_rank0(comm, lambda row=row: csv.write(row))
-                if every_ckpt and n < steps and n % every_ckpt == 0:
-                    out.flush()  # a checkpoint never runs ahead of the listed series
+                if writers.every_ckpt and n < steps and n % writers.every_ckpt == 0:
+                    writers.out.flush()  # a checkpoint never runs ahead of the listed series
                     checkpoint.write(outdir, model, n, row["t"], part)
             except SolveFailure as exc:
                 raise _located(exc, n, row["t"], cfg.time.k) from None
             if on_step is not None:
                 on_step(row)
+            signum = comm.allreduce(stop(), op=MPI.MAX) if stop is not None and n < steps else 0
+            if signum:
+                interrupted = _stop_here(writers.out, outdir, model, n, row["t"], part, signum)
+                break
         try:
-            out.close()
+            writers.out.close()
         except SolveFailure as exc:
             raise _located(exc, steps, steps * cfg.time.k, cfg.time.k) from None
         finished = True
     finally:
-        out.close(quiet=not finished)
-        if csv is not None:
-            csv.close()
+        writers.close(finished)
+    if interrupted is not None:
+        raise interrupted
     return rows
+
+
+class _Writers:
+    """What a run writes at a level: the fields (XDMF), the contact profile, the CSV row; config.toml at the start.
+
+    ``keep``/``keep_until``/``profile_until``: a restart's CSV lines, series levels and profile levels to keep."""
+
+    def __init__(self, model: Model, outdir: Path | None, sensors: tuple, keep: list[str] | None,
+                 keep_until: float | None, profile_until: int | None) -> None:
+        cfg, comm = model.cfg, model.comm
+        self.comm, self.steps, self.every = comm, cfg.time.steps, cfg.output.every
+        if outdir is not None:
+            on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
+        self.out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
+        columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+                   + tuple(c for s in sensors for c in s.columns))
+        self.csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
+        traces = model.mech.diagnostics.traces
+        self.profile = (ProfileWriter(outdir / "contact.csv", comm, traces, profile_until)
+                        if outdir is not None and traces is not None else None)
+        self.every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
+
+    def level(self, row: dict) -> None:
+        """Write level ``row["step"]`` where it is written; its output time goes to the row."""
+        n, t0 = row["step"], time.perf_counter()
+        if writes_level(n, self.steps, self.every):
+            self.out.write(row["t"])
+            if self.profile is not None:
+                self.profile.write(n, row["t"])
+        row["time_output"] = time.perf_counter() - t0
+        row["wall_time"] += row["time_output"]
+        if self.csv is not None:
+            on_rank0(self.comm, lambda: self.csv.write(row))
+
+    def close(self, finished: bool) -> None:
+        self.out.close(quiet=not finished)
+        if self.csv is not None:
+            self.csv.close()
+
+
+def _stop_here(out: Outputs, outdir: Path | None, model: Model, n: int, t: float, part: int,
+               signum: int) -> Interrupted:
+    """End an interrupted run at level n: the series written up to it and a checkpoint of it."""
+    out.flush()
+    if outdir is not None:
+        checkpoint.write(outdir, model, n, t, part)
+    return Interrupted(signum, n, t, outdir is not None)
 
 
 def _located(exc: SolveFailure, n: int, t: float, k: float) -> SolveFailure:

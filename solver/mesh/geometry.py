@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
-from dolfinx import fem
 from dolfinx import mesh as dmesh
+from dolfinx.cpp.mesh import entities_to_geometry
 from mpi4py import MPI
 
 from solver.config import BoundaryConfig, MeshConfig
@@ -45,9 +45,22 @@ class Geometry:
         return self.facet_tags.indices[self.facet_tags.values == self.tags[name]]
 
     def measure(self, name: str) -> float:
-        """Length (area) of a named boundary part, summed over ranks."""
+        """Length (area) of a named boundary part, summed over ranks: |F| = |x1 - x0| for a segment,
+        |(x1 - x0) x (x2 - x0)| / 2 for a triangle, over the owned facets (affine facets, as the built-in and
+        gmsh meshes have). From the coordinates, not a form: a form's compiled module is named after its mesh,
+        so every mesh compiled it again (issue 32)."""
+        fdim = self.dim - 1
+        facets = self.facets(name)
+        facets = facets[facets < self.mesh.topology.index_map(fdim).size_local]
 
-        return self.comm.allreduce(fem.assemble_scalar(fem.form(1.0 * self.ds(self.tags[name]))), op=MPI.SUM)
+        self.mesh.topology.create_connectivity(fdim, 0)
+        nodes = entities_to_geometry(self.mesh._mesh, fdim, facets.astype(np.int32), False)  # the C++ mesh (0.5.2)
+        x = self.mesh.geometry.x[nodes.reshape(-1)].reshape(len(facets), fdim + 1, 3)  # (a rank may own none)
+        if fdim == 1:
+            size = np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
+        else:
+            size = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
+        return self.comm.allreduce(float(size.sum()), op=MPI.SUM)
 
     def num_cells(self) -> int:
         imap = self.mesh.topology.index_map(self.dim)
@@ -126,6 +139,7 @@ def _gmsh(comm: MPI.Comm, cfg: MeshConfig, gdim: int):
     from dolfinx.io import gmshio
 
     names: dict[str, int] = {}
+    domain = True
     if comm.rank == 0:
         gmsh.initialize()
         gmsh.option.setNumber("General.Terminal", 0)
@@ -133,7 +147,15 @@ def _gmsh(comm: MPI.Comm, cfg: MeshConfig, gdim: int):
         gmsh.merge(cfg.file)
         for dim, tag in gmsh.model.getPhysicalGroups(dim=gdim - 1):
             names[gmsh.model.getPhysicalName(dim, tag) or str(tag)] = tag
-    names = comm.bcast(names, root=0)
+        # gmshio takes the cells from the physical groups of dimension gdim: without one it fails deep inside
+        domain = bool(gmsh.model.getPhysicalGroups(dim=gdim))
+        if not domain:
+            gmsh.finalize()
+    names, domain = comm.bcast((names, domain), root=0)
+    if not domain:
+        raise ConfigError(f"mesh.file = {cfg.file!r}: the mesh has no physical group of dimension {gdim} (the body's "
+                          f"cells, named 'domain' in meshes/README.md); add one, and one of dimension {gdim - 1} for "
+                          "each boundary part")
     try:
         msh, _, ft = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=gdim)
     finally:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.errors import UsageError
 from solver.post.results import read_csv, read_profile, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
 
 
@@ -46,14 +47,30 @@ def auto_warp(res: dict) -> float:
     return float(max(m for m in (1, 2, 5) if m * e <= w) * e)
 
 
+def _range(values: np.ndarray, clim):
+    """The colour range, and a note for the title: a constant field gets a range around its value (a zero-width
+    one draws it in the colour map's end colour, black for magma, and hides the bar's ticks)."""
+    lo, hi = (float(np.min(values)), float(np.max(values))) if clim is None else clim
+    if hi - lo > 1e-12 * max(abs(lo), abs(hi), 1e-300):
+        return (lo, hi), ""
+    v = float(np.mean(values))
+    pad = 0.5 * abs(v) if v else 1.0
+    return (v - pad, v + pad), f" -- constant: {v:.6g} everywhere"
+
+
 def render(res: dict, field: str, t: float, warp: float, path: Path, title: str, clim=None, cmap="viridis") -> None:
     import pyvista as pv
+    from vtkmodules.vtkCommonCore import vtkLogger
 
+    # off screen without an X server VTK warns (in ANSI yellow) before it renders anyway: errors only
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
     pv.OFF_SCREEN = True
     grid = _grid(res, t, warp)
     values = res["fields"][field][t]
     if values.ndim > 1:
         values = values[:, 0]
+    clim, note = _range(values, clim)
+    title += note
     if len(values) == grid.n_cells:
         grid.cell_data[field] = values
     else:
@@ -68,15 +85,21 @@ def render(res: dict, field: str, t: float, warp: float, path: Path, title: str,
     p = pv.Plotter(off_screen=True, window_size=(900, 650))
     p.add_mesh(edges, color="gray", line_width=1)
     p.add_mesh(grid, scalars=field, cmap=cmap, clim=clim, show_edges=False,
-               scalar_bar_args={"title": field.replace("_", " "), "vertical": False, "fmt": "%.3g",
-                                "position_x": 0.2, "position_y": 0.04, "width": 0.6, "height": 0.08})
+               # the bar at the right edge, beside the body (not over its contact edge), its title above it
+               scalar_bar_args={"title": field.replace("_", " ") + "\n", "vertical": True, "fmt": "%.3g",
+                                "position_x": 0.86, "position_y": 0.15, "width": 0.08, "height": 0.7})
     p.add_text(f"{title}\nt = {t:g}, displacement x {warp:g} (grey: undeformed)", font_size=11)
     if solid:
         p.view_isometric()
-        p.camera.zoom(1.1)
+        p.camera.zoom(0.9)  # the whole body, clear of the colour bar at the right
     else:
         p.view_xy()
-        p.camera.zoom(1.25)
+        p.camera.zoom(1.1)
+        # move the body left of the bar: the camera looks at a point right of the body's centre
+        (x0, x1, *_), cam = grid.bounds, p.camera
+        dx = 0.12 * (x1 - x0)
+        cam.focal_point = (cam.focal_point[0] + dx, cam.focal_point[1], cam.focal_point[2])
+        cam.position = (cam.position[0] + dx, cam.position[1], cam.position[2])
     p.screenshot(str(path))
     p.close()
 
@@ -143,9 +166,10 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
     """Write the PNGs of a results directory (plus von Mises at ``extra_times``); returns their paths."""
     directory = Path(directory)
     out = Path(out) if out else directory
-    out.mkdir(parents=True, exist_ok=True)
     res = read_results(directory)
     times = res["times"]
+    nearest = [_nearest_level(times, t) for t in extra_times]  # refused before anything is drawn
+    out.mkdir(parents=True, exist_ok=True)
     w = warp if warp is not None else auto_warp(res)
     made = []
     for field, what in (("von_mises_elastic", "A eps(u)"), ("von_mises", "sigma = A eps(u) + memory")):
@@ -154,8 +178,7 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
         vm = res["fields"][field]
         clim = (0.0, max(float(np.max(v)) for v in vm.values()))  # one colour scale for both times
         picks = [("initial", times[0]), ("final", times[-1])]
-        for t in extra_times:
-            near = min(times, key=lambda s, t=t: abs(s - t))
+        for near in nearest:
             picks.append((f"t{near:g}".replace(".", "_"), near))
         for label, t in picks:
             path = out / f"{field}_{label}.png"
@@ -175,6 +198,18 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
     return made
 
 
+def _nearest_level(times: list[float], t: float) -> float:
+    """The written level nearest to t (said on stderr when it is not t); a t outside the written levels'
+    span [t_0, t_last] is a UsageError."""
+    if not (times[0] <= t <= times[-1]):
+        raise UsageError(f"--times {t:g}: outside the written levels, which span [{times[0]:g}, {times[-1]:g}]")
+    near = min(times, key=lambda s: abs(s - t))
+    if near != t:
+        print(f"note: --times {t:g}: no level written at that time; drawn at the nearest written level, "
+              f"t = {near:g}", file=sys.stderr)
+    return near
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="solver plot", description="PNG pictures of a results directory")
     p.add_argument("directory")
@@ -185,6 +220,11 @@ def main(argv: list[str] | None = None) -> int:
     if not (Path(args.directory) / "solution.xdmf").exists():
         print(f"error: {args.directory}: no solution.xdmf (is it a results directory?)", file=sys.stderr)
         return 2
-    for path in plot_results(args.directory, args.warp, args.output, tuple(args.times)):
+    try:
+        made = plot_results(args.directory, args.warp, args.output, tuple(args.times))
+    except UsageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for path in made:
         print(path)
     return 0

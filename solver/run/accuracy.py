@@ -77,6 +77,10 @@ ROOM_MARGIN = 0.25
 # best rate in L2 ((q + 1) in h: s = (q + 1) / 2)
 ZETA_EXPONENT_MIN = 0.5
 ZETA_EXPONENT_MAX = {1: 1.0, 2: 1.5}
+# memory a run needs per displacement dof (all ranks together): 8.7 GB at 1,042,802 dofs, measured on a
+# tolerance run of Example 1 (issue 32); the planner never grows a mesh past MEMORY_SHARE of the machine's memory
+BYTES_PER_DOF = 8.4e3
+MEMORY_SHARE = 0.8
 CHOSEN_KEYS = ("mesh.nx", "mesh.ny", "mesh.nz", "time.k", "discretization.u_degree", "discretization.zeta_degree",
                "time.order")
 
@@ -437,6 +441,7 @@ class _Planner:
             lv = _Level0(_with(self.base, degrees(max(acc.degrees))), comm, self.geo0)
             self.tol = acc.tolerance * lv.strain_norm
             log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {self.tol:.4g}")
+        self.max_dofs, self.limit = dof_limit(acc, comm)
         self.seqs: dict[int, list[dict]] = {d: [] for d in acc.degrees}
         self.runs: dict = {}  # zeta's runs, by (mesh, step)
         # set by plan(): what a mesh is solved with (the t = 0 problem or coarse-step runs), eta's growth factor
@@ -518,7 +523,21 @@ class _Planner:
         degree = min(self.acc.degrees, key=lambda d: cost[d])
         self.log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in self.acc.degrees)
                  + f" -> P{degree}")
+        self._refuse_beyond_reach(share)
         return degree, last[degree]
+
+    def _refuse_beyond_reach(self, share: float) -> None:
+        """Refuse at once a tolerance whose predicted dofs (error ~ dofs^-rate from each degree's first mesh) exceed
+        the limit for every degree, instead of refining for hours towards it."""
+        needed = {}
+        for d in self.acc.degrees:
+            first = self.seqs[d][0]
+            needed[d] = first["dofs"] * max(first["estimate"] * self.g / share, 1.0) ** (1.0 / ADAPTED_RATE[d])
+        best = min(needed, key=needed.get)
+        if needed[best] > self.max_dofs:
+            first = self.seqs[best][0]
+            raise ToleranceError(self.tol, first["estimate"] * self.g, first["dofs"], self.limit, target=share,
+                                 predicted=needed[best])
 
     def _mesh(self, degree: int, share: float, geo, eta2) -> tuple:
         """u's mesh: adapted on from the degree's probe until C eta_0 growth is within (1 - ZETA_SHARE) of the
@@ -549,9 +568,9 @@ class _Planner:
                     return room
             if finer is None:
                 finer = refine_uniformly(geo)
-            if finer.num_cells() * degree**2 > self.acc.max_dofs:  # 2-D: about p^2 dofs per cell
+            if finer.num_cells() * degree**2 > self.max_dofs:  # 2-D: about p^2 dofs per cell
                 raise ToleranceError(self.tol, zeta_space, finer.num_cells(),
-                                     "accuracy.max_dofs (the damage's space error)", target=share - seq[-1]["estimate"] * G)
+                                     f"{self.limit} (the damage's space error)", target=share - seq[-1]["estimate"] * G)
             chain, geo = [*chain, geo][-2:], finer
             zeta_space, finer = _zeta_space(run_k0, self.comm, geo, chain, self.runs)
             lv = self.level(_with(self.over, degrees(degree)), self.comm, geo)
@@ -611,9 +630,31 @@ class _Planner:
                      f"(target {target:.3e})")
             if rec["estimate"] <= target or (max_steps is not None and solved >= max_steps):
                 return lv.model.geo, lv.eta2
-            if rec["dofs"] > acc.max_dofs:
-                raise ToleranceError(self.tol, rec["estimate"], rec["dofs"], "accuracy.max_dofs", target=target)
+            if rec["dofs"] > self.max_dofs:
+                raise ToleranceError(self.tol, rec["estimate"], rec["dofs"], self.limit, target=target)
             geo = refined(lv.model.geo, lv.eta2)
+
+
+def memory_dofs(comm: MPI.Comm) -> int:
+    """The displacement dofs that fit in MEMORY_SHARE of the memory of the machines the ranks run on
+    (each node counted once), at BYTES_PER_DOF."""
+    import os
+    import socket
+
+    try:
+        mine = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError):
+        return 2**62
+    nodes = dict(comm.allgather((socket.gethostname(), mine)))
+    return int(MEMORY_SHARE * sum(nodes.values()) / BYTES_PER_DOF)
+
+
+def dof_limit(acc, comm: MPI.Comm) -> tuple[int, str]:
+    """The planner's limit on the dofs of a mesh and the setting it comes from: accuracy.max_dofs, or the memory."""
+    mem = memory_dofs(comm)
+    if mem < acc.max_dofs:
+        return mem, f"the memory ({mem} dofs fit in {MEMORY_SHARE:.0%} of it; accuracy.max_dofs = {acc.max_dofs})"
+    return acc.max_dofs, "accuracy.max_dofs"
 
 
 def plan(scene, comm: MPI.Comm, log=print) -> Plan:

@@ -9,7 +9,7 @@ meshes of a tolerance run, the studies, the tests) asks for the same modules aga
 keeps each module found in the disk cache for the process, keyed by everything FFCx's own
 lookup is keyed by (the module's name, which is the forms' signature and the compiler
 parameters, the object names and the cache directory). A module FFCx has not compiled yet
-goes the usual way; once compiled and found on disk, it is kept too.
+goes the usual way; once compiled and loaded, it is kept too.
 """
 
 from __future__ import annotations
@@ -34,9 +34,21 @@ def _lookup(module_name: str, object_names: list[str], cache_dir: Path | str, ti
     return objects, module
 
 
+_load = ffcx_jit._load_objects
+
+
+def _loaded(cache_dir, module_name: str, object_names: list[str]):
+    """FFCx's ``_load_objects`` (after a compile, and inside a disk lookup), kept in the memo: on a cold cache the
+    modules compiled by the first build are then not looked up on disk again by the second (issue 32)."""
+    objects, module = _load(cache_dir, module_name, object_names)
+    _found[(module_name, tuple(object_names), str(cache_dir))] = (objects, module)
+    return objects, module
+
+
 def install() -> None:
-    """Put the memo in front of FFCx's lookup (once per process; idempotent)."""
+    """Put the memo in front of FFCx's lookup and loader (once per process; idempotent)."""
     ffcx_jit.get_cached_module = _lookup
+    ffcx_jit._load_objects = _loaded
 
 
 def kept() -> int:

@@ -1,6 +1,7 @@
 """The in-process memo of compiled forms: a model built again asks the disk cache for nothing, and is the same."""
 
 import numpy as np
+import pytest
 
 from solver.config import from_dict
 from solver.run import formcache
@@ -29,3 +30,40 @@ def test_a_module_not_in_the_memo_is_looked_up_on_disk(monkeypatch):
     assert formcache._lookup("libffcx_forms_not_compiled_yet", ["form_x"], "/nonexistent", 1) == (None, None)
     assert asked == ["libffcx_forms_not_compiled_yet"]
     assert ("libffcx_forms_not_compiled_yet", ("form_x",), "/nonexistent") not in formcache._found
+
+
+@pytest.mark.serial  # starts its own process
+@pytest.mark.xfail(strict=True, reason="issue 32 item 15, not finished: on a cold cache the first build compiles the "
+                   "explicit damage step's right-hand side under another signature than the second build (found, not "
+                   "yet explained); measure's per-mesh form and the memo of compiled modules are fixed")
+def test_from_a_cold_cache(tmp_path):
+    """Issue 32, item 15: in a fresh image (an empty FFCx cache) the test above failed every time: the second build
+    looked up on disk the modules the first had compiled, and Geometry.measure compiled a form named after each
+    mesh. Run it with an empty cache directory of its own."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    res = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                          "tests/run/test_formcache.py::test_a_second_build_reads_no_disk_cache_and_gives_the_same_level"],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+    assert res.returncode == 0, res.stdout[-3000:]
+    assert (tmp_path / "cache" / "fenics").is_dir()  # it did compile into the fresh cache
+
+
+def test_the_measure_of_a_boundary_part_compiles_nothing(comm, monkeypatch):
+    """Geometry.measure from coordinates: no form, so a new mesh compiles nothing for it."""
+    import ffcx.codegeneration.jit as ffcx_jit
+
+    from solver.config import from_dict as scene
+    from solver.mesh.geometry import build
+
+    cfg = scene({"mesh": {"nx": 3, "ny": 5}})
+    compiled = []
+    monkeypatch.setattr(ffcx_jit, "compile_forms", lambda *a, **k: compiled.append(a) or None)
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    assert compiled == []
+    assert abs(geo.measure("bottom") - 1.0) < 1e-14 and abs(geo.measure("left") - 1.0) < 1e-14

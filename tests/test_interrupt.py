@@ -1,0 +1,102 @@
+"""A run stopped by SIGINT/SIGTERM (issue 32, item 3): it ends at the end of the current level with the series,
+the CSV and a checkpoint written up to there, says in one line where it stopped and how to continue, exits
+128 + the signal, and ``--restart`` then reaches the uninterrupted result (to 1e-12)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, mpi_env, solver_cmd
+from conftest import run_cli as cli
+
+from solver.post.results import read_csv, read_results
+
+pytestmark = pytest.mark.serial  # each test starts its own processes
+
+SCENE = ["run", "configs/example1.toml", "--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.002",
+         "--set", "output.every=3", "--set", "output.checkpoint_every=1000"]
+# a restart factorizes its matrix again: the counter differs, the arithmetic does not
+NOT_COMPARED = ("wall_time", "factorizations")
+
+
+def _ranks(mpirun: int) -> list[int]:
+    """The processes mpirun started (its children)."""
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == mpirun:
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def _interrupted_run(out: Path, log: Path, nproc: int, signum: int) -> subprocess.CompletedProcess:
+    """Start the run, wait for its 20 % progress line, send the signal (to the ranks, as a scheduler does)."""
+    cmd = solver_cmd([*SCENE, "--output", str(out)], nproc)
+    with open(log, "w") as err:
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=mpi_env(), stderr=err, stdout=subprocess.DEVNULL)
+        deadline = time.monotonic() + 300
+        while " 20% level" not in log.read_text():
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+            time.sleep(0.2)
+        for pid in ([proc.pid] if nproc == 1 else _ranks(proc.pid)):
+            subprocess.run(["kill", f"-{signal.Signals(signum).name}", str(pid)], check=True)
+        proc.wait(timeout=300)
+    return proc
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupted_run_stops_cleanly_and_restarts_to_the_same_result(tmp_path, nproc, signum):
+    out, ref, log = tmp_path / "o", tmp_path / "ref", tmp_path / "log"
+    proc = _interrupted_run(out, log, nproc, signum)
+    text = log.read_text()
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    stopped = [ln for ln in text.splitlines() if ln.startswith("stopped by")]
+    assert len(stopped) == 1 and f"stopped by {signal.Signals(signum).name} at the end of step " in stopped[0], text
+    assert "--restart" in stopped[0] and str(out) in stopped[0]
+    step = int(stopped[0].split("step ")[1].split(" ")[0])
+    if nproc == 1:
+        assert proc.returncode == 128 + signum
+    else:
+        assert proc.returncode != 0  # mpirun reports the ranks' 128 + signum as its own failure
+    import h5py
+
+    with h5py.File(out / "checkpoint.h5") as h5:
+        assert int(h5.attrs["step"]) == step
+    rows = read_csv(out / "timeseries.csv")
+    assert [int(r["step"]) for r in rows] == list(range(step + 1))
+    got = read_results(out)
+    assert got["times"][-1] == pytest.approx(0.002 * (step - step % 3))
+    # continue, and compare with a run that was not stopped
+    restart = cli([*SCENE, "--output", str(out), "--restart", "--no-progress"], nproc)
+    assert restart.returncode == 0, restart.stderr
+    assert cli([*SCENE, "--output", str(ref), "--no-progress"], nproc).returncode == 0
+    _same(out, ref)
+
+
+def _same(a: Path, b: Path) -> None:
+    ra, rb = read_csv(a / "timeseries.csv"), read_csv(b / "timeseries.csv")
+    assert len(ra) == len(rb) == 501
+    for x, y in zip(ra, rb):
+        for c in x:
+            if c.startswith("time_") or c in NOT_COMPARED:
+                continue
+            assert float(x[c]) == pytest.approx(float(y[c]), rel=1e-12, abs=1e-12), (x["step"], c)
+    ga, gb = read_results(a), read_results(b)
+    assert ga["times"] == gb["times"]
+    xa, xb = np.round(ga["geometry"], 12), np.round(gb["geometry"], 12)
+    oa, ob = np.lexsort(xa.T[::-1]), np.lexsort(xb.T[::-1])
+    assert np.array_equal(xa[oa], xb[ob])
+    for name, values in gb["fields"].items():
+        if ga["fields"][name][gb["times"][0]].shape[0] != len(xa):
+            continue  # cell fields: compared through the node fields they are computed from
+        for t, v in values.items():
+            assert np.allclose(ga["fields"][name][t][oa], v[ob], rtol=1e-12, atol=1e-12), (name, t)
