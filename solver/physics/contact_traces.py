@@ -18,6 +18,7 @@ import numpy as np
 import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
@@ -29,9 +30,11 @@ from solver.physics.gap import gap_function, gap_values
 class ContactTraces:
     """λ_h, u_ν, g and u_ν − g on Γ_C as functions of the degree-p Lagrange space (:meth:`update` per level)."""
 
-    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int) -> None:
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
+                 pressure_floor: float = 0.0) -> None:
         mesh = geo.mesh
         self.geo, self.parts, self.comm = geo, parts, geo.comm
+        self.pressure_floor = pressure_floor  # pressures within it of the peak (or all, below it) tie
         p = u.function_space.ufl_element().degree()
         S = fem.FunctionSpace(mesh, ("Lagrange", p))
         self.pressure = fem.Function(S, name="contact_pressure")
@@ -84,14 +87,19 @@ class ContactTraces:
         self.penetration.x.array[self.on] = self.normal_displacement.x.array[self.on] - self.gap.x.array[self.on]
 
     def peak(self) -> tuple[float, np.ndarray]:
-        """The largest λ_h over Γ_C and the point where it sits (the same on every rank)."""
+        """The largest λ_h over Γ_C and the point where it sits, the same on every rank and for any partition.
+
+        Points whose λ_h is within max(1e-9 |peak|, ``pressure_floor``) of the peak tie, and the first of them
+        (smallest x, then y, then z) is the one named: a flat top, or a level without contact (λ_h at round-off
+        everywhere), would otherwise name whichever point a partition's round-off puts first.
+        """
         owned = np.concatenate(list(self.part_dofs.values()))
-        best = (-np.inf, np.zeros(3))
-        if len(owned):
-            i = owned[np.argmax(self.pressure.x.array[owned])]
-            best = (float(self.pressure.x.array[i]), self.x[i].copy())
-        value, x = max(self.comm.allgather(best), key=lambda b: b[0])
-        return value, x
+        values = self.pressure.x.array[owned]
+        value = self.comm.allreduce(float(values.max()) if len(owned) else -np.inf, op=MPI.MAX)
+        tol = max(1e-9 * abs(value), self.pressure_floor)
+        near = self.x[owned[values >= value - tol]]
+        first = tuple(near[np.lexsort(near.T[::-1])[0]]) if len(near) else (np.inf, np.inf, np.inf)
+        return value, np.array(min(self.comm.allgather(first)))
 
     def profile(self) -> list[tuple[str, np.ndarray]] | None:
         """Per part on rank 0 (None elsewhere): rows (s, x, y, z, gap, u_ν, u_ν − g, λ_h) of its nodes in order

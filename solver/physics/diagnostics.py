@@ -81,13 +81,13 @@ class DisplacementDiagnostics:
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
                  points: ContactPoints | None, reactions: Reactions | None = None,
-                 strain_norm: Callable[[], float] | None = None) -> None:
+                 strain_norm: Callable[[], float] | None = None, pressure_floor: float = 0.0) -> None:
         self.geo, self.u, self.points, self.reactions = geo, u, points, reactions
         self._point_norm = strain_norm  # ||eps(u)|| at the memory points (memory.PointStrainNorm), if exact there
         self.has_contact = bool(parts)
         self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
         self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
-        self.traces = ContactTraces(geo, u, parts, degree) if parts else None
+        self.traces = ContactTraces(geo, u, parts, degree, pressure_floor) if parts else None
         self.parts = parts
         self._warned = False
         self._table_errors = {part.name: interpolation_error(part) for part in parts}  # once, not in the loop

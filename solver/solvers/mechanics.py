@@ -36,6 +36,9 @@ from solver.solvers.newton import NewtonSolver
 __all__ = ["Mechanics", "SolveInfo", "DisplacementSolveError"]
 
 
+PRESSURE_FLOOR = 1e-12  # a contact pressure below this times Young's modulus is round-off: no contact
+
+
 class Mechanics:
     """u_n for each level: ``solve(t)``; plus the state a checkpoint carries and the diagnostics."""
 
@@ -68,7 +71,8 @@ class Mechanics:
         else:
             self.solver = PenaltyDualitySolver(self.problem, points, settings, geo.comm, geo, parts)
         self.diagnostics = DisplacementDiagnostics(geo, u, parts, deg, points, Reactions(self.problem),
-                                                   _point_strain_norm(self.ops, history, u))
+                                                   _point_strain_norm(self.ops, history, u),
+                                                   pressure_floor=PRESSURE_FLOOR * material.E)
 
     def solve(self, t: float) -> SolveInfo:
         """Solve for u at time t (u holds the previous level as initial guess)."""
