@@ -292,7 +292,7 @@ def render(args: argparse.Namespace) -> int:
     shown, outline = _pipeline(pvs, reader, t, has_u, warp)
     disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
     odisp = pvs.Show(outline, view)
-    pvs.ColorBy(odisp, None)
+    odisp.ColorArrayName = ["POINTS", ""]  # a solid colour (ColorBy(rep, None) fails on a 3-D outline: association NONE)
     odisp.AmbientColor = odisp.DiffuseColor = [0.45, 0.45, 0.45]
     odisp.LineWidth = 2.0
     _scalar_bar(pvs, view, disp, lut, args.field, ncomp, H)

@@ -64,6 +64,24 @@ def test_paraview_renders_von_mises(results):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("scene", ["configs/example1_3d.toml", "configs/column3d.toml"])
+def test_paraview_renders_a_3d_result(tmp_path, paraview, scene):
+    """3-D results (issue 32, item 16): the undeformed outline's solid colour failed there ("invalid association
+    string 'NONE'" from ColorBy(rep, None)), then an X error at exit."""
+    out = tmp_path / "r"
+    run = [sys.executable, "-m", "solver", "run", scene, "--output", str(out), "--no-progress", "--set", "time.T=0.1",
+           "--set", "time.k=0.05"]
+    if "example1_3d" in scene:
+        run += ["--set", "mesh.nx=3", "--set", "mesh.ny=3", "--set", "mesh.nz=3"]
+    res = subprocess.run(run, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    png = tmp_path / "pv.png"
+    res = render(str(out), "--output", str(png), "--size", "600", "400")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "invalid association" not in res.stderr and png.stat().st_size > 10_000
+
+
+@pytest.mark.slow
 def test_paraview_default_output_and_bad_field(results):
     res = render(str(results), "--time", "0.5", "--warp", "1")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
