@@ -74,17 +74,29 @@ class ContactTraces:
         self.ksp.getPC().setType("jacobi")
         self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
 
+    def update_pressure(self) -> None:
+        """λ_h at the current u (every level: the peak-pressure columns read it)."""
+        self._solve(self.pressure)
+
     def update(self) -> None:
-        """λ_h and u_ν at the current u; the penetration u_ν − g on Γ_C."""
-        for target, form in self.rhs.items():
-            with self.b.localForm() as local:
-                local.set(0.0)
-            fpetsc.assemble_vector(self.b, form)
-            self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            self.ksp.solve(self.b, target.vector)
-            target.x.scatter_forward()
+        """λ_h and u_ν at the current u; the penetration u_ν − g on Γ_C (the levels that are written)."""
+        self._solve(self.pressure)
+        self.update_normal()
+
+    def update_normal(self) -> None:
+        """u_ν and the penetration u_ν − g on Γ_C at the current u (λ_h is left as it is)."""
+        self._solve(self.normal_displacement)
         self.penetration.x.array[:] = 0.0
         self.penetration.x.array[self.on] = self.normal_displacement.x.array[self.on] - self.gap.x.array[self.on]
+
+    def _solve(self, target: fem.Function) -> None:
+        """(target, psi)_{Γ_C} = the target's right-hand side (one CG solve of the boundary mass matrix)."""
+        with self.b.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(self.b, self.rhs[target])
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.ksp.solve(self.b, target.vector)
+        target.x.scatter_forward()
 
     def peak(self) -> tuple[float, np.ndarray]:
         """The largest λ_h over Γ_C and the point where it sits, the same on every rank and for any partition.

@@ -130,8 +130,9 @@ class DisplacementDiagnostics:
         return self.peak_columns + (self.reactions.columns if self.reactions is not None else ())
 
     def peak(self) -> dict[str, float]:
-        """max λ_h over Γ_C and its point, after updating the contact traces (the fields the writer reads)."""
-        self.traces.update()
+        """max λ_h over Γ_C and its point, after updating λ_h (u_ν and the penetration are updated by the writer, at
+        the levels it writes: one solve a level instead of two)."""
+        self.traces.update_pressure()
         value, x = self.traces.peak()
         if not self._warned and value > 0:
             self._warned = True
