@@ -68,11 +68,14 @@ class ContactTraces:
             self.normal_displacement: fem.form(sum(ufl.dot(u, n) * psi * ds(q) for q in parts)),
         }
         self.b = fpetsc.create_vector(self.rhs[self.pressure])
+        # factored once (a boundary mass matrix, identity off Γ_C): each level's λ_h is one triangular solve pair
         self.ksp = PETSc.KSP().create(self.comm)
         self.ksp.setOperators(A)
-        self.ksp.setType("cg")
-        self.ksp.getPC().setType("jacobi")
-        self.ksp.setTolerances(rtol=1e-14, atol=1e-300)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("cholesky")
+        pc.setFactorSolverType("mumps" if self.comm.size > 1 else "petsc")
+        self.ksp.setUp()
 
     def update_pressure(self) -> None:
         """λ_h at the current u (every level: the peak-pressure columns read it)."""
@@ -90,7 +93,7 @@ class ContactTraces:
         self.penetration.x.array[self.on] = self.normal_displacement.x.array[self.on] - self.gap.x.array[self.on]
 
     def _solve(self, target: fem.Function) -> None:
-        """(target, psi)_{Γ_C} = the target's right-hand side (one CG solve of the boundary mass matrix)."""
+        """(target, psi)_{Γ_C} = the target's right-hand side (a triangular solve pair of the factored mass matrix)."""
         with self.b.localForm() as local:
             local.set(0.0)
         fpetsc.assemble_vector(self.b, self.rhs[target])
