@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-ROOT = Path(__file__).resolve().parents[1]
+from studies import REPO as ROOT  # noqa: E402
 
 
 def _bench_scene(gap, n: int, steps: int) -> dict:

@@ -65,6 +65,24 @@ def point_value(f, point) -> np.ndarray:
     return found[0]
 
 
+def contact_residuals(model, forces: np.ndarray):
+    """(F, G): the model's contact residual assembled from its UFL form, and the nodal forces ``forces`` (local
+    array, e.g. ContactPoints.forces(p)) as a vector of the same layout; both summed over ghosts."""
+    from dolfinx.fem import petsc as fpetsc
+    from petsc4py import PETSc
+
+    F = model.mech.ops.b.duplicate()
+    with F.localForm() as f:
+        f.set(0.0)
+    fpetsc.assemble_vector(F, model.mech.contact.residual_form)
+    F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    G = F.duplicate()
+    with G.localForm() as g:
+        g.array[:] = forces
+    G.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    return F, G
+
+
 def eval_point(expr, mesh, point=(1 / 3, 1 / 3)) -> np.ndarray:
     """Value of a UFL expression at a reference point of local cell 0 (constant-data tests)."""
     from dolfinx import fem

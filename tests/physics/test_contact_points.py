@@ -3,9 +3,8 @@
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, contact_residuals
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from solver.config import load
 from solver.physics.contact_points import ContactPoints
@@ -15,21 +14,12 @@ from solver.run.model import build_model
 @pytest.mark.parametrize("degree", [1, 2])
 def test_contact_points_reproduce_the_ufl_contact_term(comm, degree):
     """N^T W p(N u - g) equals the assembled contact residual, and N u - g is the penetration (P1 and P2)."""
-    from dolfinx.fem import petsc as fpetsc
 
     cfg = load(ROOT / "configs/hard.toml", ["mesh.nx=8", "mesh.ny=8", f"discretization.u_degree={degree}"])
     m = build_model(cfg, comm)
     m.mech.solve(0.0)
     pts = ContactPoints(m.geo, m.u.function_space, cfg.contact, cfg.solver.contact_quadrature_degree)
-    F = m.mech.ops.b.duplicate()
-    with F.localForm() as f:
-        f.set(0.0)
-    fpetsc.assemble_vector(F, m.mech.contact.residual_form)
-    F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-    G = F.duplicate()
-    with G.localForm() as g:
-        g.array[:] = pts.forces(np.maximum(pts.penetration(m.u.x.array), 0) / cfg.contact[0].mu)
-    G.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    F, G = contact_residuals(m, pts.forces(np.maximum(pts.penetration(m.u.x.array), 0) / cfg.contact[0].mu))
     # both evaluate p = (u.n - g) / mu: the difference of O(|u|) numbers at quadrature points, so
     # round-off of eps |u| is amplified by 1/mu = 1e10 (2e-9 seen with OpenBLAS, 1e-16 with the
     # reference BLAS); a wrong normal, point or weight would differ by O(||F||)
