@@ -8,8 +8,9 @@ from dataclasses import dataclass
 
 from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
 
-METHODS = ("newton", "newton_energy", "penalty_duality", "fixed_point")
-NEWTON_METHODS = ("newton", "newton_energy")  # Newton steps on J: any dimension, any linear solver, any memory rule
+METHODS = ("newton", "newton_energy", "newton_condensed", "penalty_duality", "fixed_point")
+# Newton steps on J: any dimension, any linear solver, any memory rule
+NEWTON_METHODS = ("newton", "newton_energy", "newton_condensed")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
 LINEAR = ("auto", "petsc", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")

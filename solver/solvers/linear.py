@@ -41,7 +41,7 @@ def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = 
     if kind != "auto":
         return kind
     if dim == 3:
-        return "iterative" if method in ("newton", "newton_energy") and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
+        return "iterative" if method in ("newton", "newton_energy", "newton_condensed") and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
     return _auto_direct(comm)
 
 

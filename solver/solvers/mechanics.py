@@ -29,6 +29,7 @@ from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.memory import History
 from solver.physics.memory_source import PointStrainNorm
 from solver.physics.operators import Dirichlet, Operators, check_rigid_motions
+from solver.solvers.condensed import CondensedNewtonSolver
 from solver.solvers.energy_newton import EnergyNewtonSolver
 from solver.solvers.fixed_point import FixedPointSolver, PenaltyDualitySolver
 from solver.solvers.newton import NewtonSolver
@@ -66,6 +67,9 @@ class Mechanics:
             self.solver = NewtonSolver(self.problem, settings, geo.comm)
         elif self.method == "newton_energy":
             self.solver = EnergyNewtonSolver(self.problem, settings, geo.comm)
+        elif self.method == "newton_condensed":
+            facets = np.concatenate([geo.facets(p.name) for p in parts])
+            self.solver = CondensedNewtonSolver(self.problem, settings, geo.comm, facets, geo.dim - 1)
         elif self.method == "fixed_point":
             self.solver = FixedPointSolver(self.problem, points, settings, geo.comm)
         else:

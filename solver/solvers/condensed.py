@@ -1,0 +1,338 @@
+"""Newton on the contact dofs alone (``solver.method = "newton_condensed"``; docs/model.md §3.3).
+
+K is assembled once per run, and the contact term j(u) of a level acts only on the dofs of the contact facets
+(B, the Dirichlet ones left out: a Lagrange trace on a facet depends on the facet's dofs only). Writing c = j_B(u)
+for the contact force on them, the level's F(u) = K u + j(u) - b = 0 is
+
+    u = u0 - K^{-1} P^T c,      u0 = K^{-1} b        (P: the restriction to B),
+
+so with v = P u (the contact dofs' displacement) and S = P K^{-1} P^T (m x m, dense, SPD; built once from m
+solves with K's factorization):
+
+    H(v) = v - P u0 + S j_B(v) = 0,        and  F(u(v)) = P^T S^{-1} H(v)  exactly: ||F|| = ||S^{-1} H(v)||.
+
+H is the gradient, times S, of the level's energy restricted to the displacements that are in equilibrium inside
+(E(v) = 1/2 (v - P u0).S^{-1}(v - P u0) + int P(u_nu - g) ds), so the method of energy_newton.py applies to it
+unchanged: the semismooth Newton step d = -(I + S C_BB)^{-1} H (C_BB: the contact Jacobian on B), taken in full
+where the active set stays, or to a new active set early in the level or with a smaller residual, else the exact
+line search on E along d (phi'(lam) = H(v + lam d).S^{-1} d). The same iterates, nearly, but each costs a
+facet assembly and an m x m dense solve instead of a sparse factorization. Then u is rebuilt by one solve with K and
+the level's residual checked by energy_newton's full iteration (which takes a full Newton step only where the
+condensed u does not already meet the test): the same equations to the same tolerance.
+
+Only where it applies (:func:`applies`): a contact energy (no implicit memory term), a piecewise linear law, a
+direct linear solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the method is newton_energy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from solver.config import SolverConfig
+from solver.physics.displacement import DisplacementProblem, SolveInfo
+from solver.physics.operators import assemble_without_diagonal
+from solver.solvers.damped_newton import DampedResult, has_energy
+from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
+from solver.solvers.linear import REASONS_SNES, direct_options, set_options
+
+MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
+LINE_RTOL = 1e-2  # as damped_newton.LINE_RTOL
+LINE_ITERATIONS = 30
+POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
+
+
+def applies(problem: DisplacementProblem, settings: SolverConfig, m: int) -> bool:
+    """Whether the condensation holds: an energy, a piecewise linear law, a direct solver, m small enough."""
+    return (has_energy(problem) and problem.contact.piecewise_linear and settings.linear != "iterative"
+            and 0 < m <= MAX_CONTACT_DOFS)
+
+
+class ContactDofs:
+    """The free dofs of the contact facets: this rank's owned ones (local indices) and the global order of all
+    m of them (rank by rank), with the gathering of their values."""
+
+    def __init__(self, u: fem.Function, facets: np.ndarray, fdim: int, bcs, comm: MPI.Comm) -> None:
+        V = u.function_space
+        bs = V.dofmap.index_map_bs
+        owned = V.dofmap.index_map.size_local * bs
+        blocks = fem.locate_dofs_topological(V, fdim, facets)
+        local = np.unique((blocks[:, None] * bs + np.arange(bs)[None, :]).ravel())
+        local = local[local < owned]
+        probe = u.vector.duplicate()
+        free = _free_mask(probe, bcs)
+        probe.destroy()
+        self.local = local[free[local]].astype(np.int32)
+        self.comm = comm
+        counts = comm.allgather(len(self.local))
+        self.counts, self.m = counts, int(sum(counts))
+        self.offset = int(sum(counts[:comm.rank]))
+        self.global_index: np.ndarray | None = None  # their global indices (set at the first use)
+
+    def gather(self, values: np.ndarray) -> np.ndarray:
+        """All m values from each rank's owned ones (in the global order)."""
+        if self.comm.size == 1:
+            return np.array(values, dtype=float)
+        out = np.empty(self.m)
+        self.comm.Allgatherv(np.ascontiguousarray(values, dtype=float), [out, self.counts])
+        return out
+
+    def mine(self, values: np.ndarray) -> np.ndarray:
+        """This rank's part of a global m-vector."""
+        return values[self.offset:self.offset + len(self.local)]
+
+
+def _free_mask(x: PETSc.Vec, bcs) -> np.ndarray:
+    """True at the owned dofs no Dirichlet condition holds (set_bc with two x0 differ exactly there)."""
+    one = x.duplicate()
+    one.set(1.0)
+    x.set(0.0)
+    fpetsc.set_bc(x, bcs, one, 1.0)  # g - 1 on the prescribed dofs, 0 elsewhere
+    a = x.array_r.copy()
+    x.set(0.0)
+    fpetsc.set_bc(x, bcs)  # g there
+    one.destroy()
+    return a == x.array_r
+
+
+class Condensation:
+    """S = P K^{-1} P^T and its Cholesky factor, K's factorization, and the level's u0 = K^{-1} b."""
+
+    def __init__(self, problem: DisplacementProblem, dofs: ContactDofs, comm: MPI.Comm, linear: str) -> None:
+        self.problem, self.dofs = problem, dofs
+        self.ksp = PETSc.KSP().create(comm)
+        prefix = f"mech_condensed_{id(self)}_"
+        set_options(prefix, direct_options(comm, linear if linear != "auto" else "auto", True), ())
+        self.ksp.setOptionsPrefix(prefix)
+        self.ksp.setOperators(problem.ops.K)
+        self.ksp.setFromOptions()
+        self.u0 = problem.u.vector.duplicate()
+        self._e = problem.u.vector.duplicate()
+        self._z = problem.u.vector.duplicate()
+        self.S = self._schur()
+        self.chol = sla.cho_factor(self.S)
+
+    def _schur(self) -> np.ndarray:
+        """S, column by column: m solves with K (collective)."""
+        dofs, e, z = self.dofs, self._e, self.u0
+        rows = np.empty((len(dofs.local), dofs.m))
+        for j in range(dofs.m):
+            e.set(0.0)
+            if dofs.offset <= j < dofs.offset + len(dofs.local):
+                e.array[dofs.local[j - dofs.offset]] = 1.0
+            self.ksp.solve(e, z)
+            rows[:, j] = z.array_r[dofs.local]
+        if dofs.comm.size == 1:
+            S = rows
+        else:
+            S = np.vstack(dofs.comm.allgather(rows))
+        return 0.5 * (S + S.T)  # symmetric up to round-off
+
+    def level(self) -> np.ndarray:
+        """u0 = K^{-1} b_n with the Dirichlet values of the level; returns P u0 (all m)."""
+        self.ksp.solve(self.problem.ops.b, self.u0)
+        fpetsc.set_bc(self.u0, self.problem.bcs)
+        return self.dofs.gather(self.u0.array_r[self.dofs.local])
+
+    def rebuild(self, c: np.ndarray, x: PETSc.Vec) -> None:
+        """x = u0 - K^{-1} P^T c: the displacement in equilibrium inside for the contact forces c."""
+        self.u0.copy(x)
+        self.add_column_solve(-c, x)
+
+    def add_column_solve(self, c: np.ndarray, x: PETSc.Vec) -> None:
+        """x += K^{-1} P^T c (one solve with K)."""
+        self._e.set(0.0)
+        self._e.array[self.dofs.local] = self.dofs.mine(c)
+        self.ksp.solve(self._e, self._z)
+        x.axpy(1.0, self._z)
+
+
+class CondensedNewtonSolver(EnergyNewtonSolver):
+    """:class:`EnergyNewtonSolver` whose contact levels are solved on the contact dofs first (module docstring);
+    where the condensation does not apply, energy_newton's method."""
+
+    def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm, facets: np.ndarray,
+                 fdim: int) -> None:
+        super().__init__(problem, settings, comm)
+        self.dofs = ContactDofs(problem.u, facets, fdim, problem.bcs, comm) if self.energy else None
+        self.on = self.energy and applies(problem, settings, self.dofs.m)
+        self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
+        self.reduced_iterations = 0  # over the run
+        self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)] if self.on else []
+
+    def solve(self, scale: float) -> SolveInfo:
+        """Solve the level on the contact dofs, rebuild u, check (and finish) it with the full iteration."""
+        if not self.on:
+            return super().solve(scale)
+        if self.cond is None:
+            self.cond = Condensation(self.problem, self.dofs, self.problem.u.function_space.mesh.comm,
+                                     self.settings.linear)
+            self.factorizations += 1
+            first = 1
+        else:
+            first = 0
+        self.test.scale = scale
+        its, v = Reduced(self, scale).run()
+        self.reduced_iterations += its
+        if its > 0:  # else the level starts from u itself, as energy_newton's would
+            c = sla.cho_solve(self.cond.chol, self.cond.u0_B - v)
+            self.cond.rebuild(c, self.problem.u.vector)
+            self.problem.u.x.scatter_forward()
+        out = self._polish(its)
+        if out.reason < 0:  # not settled by Newton steps solved through K: energy_newton's full iteration
+            ksp = self.snes.getKSP()
+            ksp.setOperators(self.problem.J, self.problem.J)
+            full = self._iterate(ksp)
+            self.problem.u.x.scatter_forward()
+            self.factorizations += full.factorizations
+            full.iterations += out.iterations
+            full.history = [*out.history[:-1], *full.history]  # its first is out's last
+            out = full
+        out.factorizations += first  # K's, once per run
+        name = REASONS_SNES.get(out.reason, str(out.reason))
+        return self._finish(out, name, scale)
+
+
+    def _polish(self, reduced: int) -> DampedResult:
+        """Full Newton steps from the rebuilt u, each solved through K (Woodbury: (K + P^T C P)^{-1} =
+        K^{-1} - K^{-1} P^T (I + C S)^{-1} C P K^{-1}, no factorization), under plain Newton's test; at most
+        POLISH_STEPS of them, taken in full (u is within round-off of the level's solution, the active set
+        settled). ``reduced``: the iterations done on v, counted first."""
+        R = PETSc.SNES.ConvergedReason
+        problem, dofs, cond = self.problem, self.dofs, self.cond
+        u, F, d = problem.u.vector, *self.reduced_work
+        out = DampedResult(R.ITERATING, reduced, [np.nan] * reduced)
+        snorm = 0.0
+        for it in range(POLISH_STEPS + 1):
+            problem.evaluate(u, F)
+            out.history.append(F.norm())
+            out.reason = self.test(it, u.norm(), snorm, out.history[-1])
+            if out.reason != R.ITERATING:
+                break
+            if it == POLISH_STEPS:
+                out.reason = R.DIVERGED_MAX_IT
+                break
+            out.iterations += 1
+            assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
+            C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
+            cond.ksp.solve(F, d)  # y = K^{-1} F
+            z = np.linalg.solve(np.eye(dofs.m) + C @ cond.S, C @ dofs.gather(d.array_r[dofs.local]))
+            d.scale(-1.0)
+            cond.add_column_solve(z, d)  # d = -(y - K^{-1} P^T z)
+            fpetsc.set_bc(d, problem.bcs, scale=0.0)
+            u.axpy(1.0, d)
+            snorm = d.norm()
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        problem.u.x.scatter_forward()
+        return out
+
+
+def _block(C: PETSc.Mat, dofs: ContactDofs, r0: int) -> np.ndarray:
+    """C_BB (m x m, on every rank) from the assembled contact Jacobian. Collective."""
+    rows = (dofs.local + r0).astype(np.int32)
+    if dofs.global_index is None:
+        dofs.global_index = np.concatenate(dofs.comm.allgather(rows)).astype(np.int32)
+    block = C.getValues(rows, dofs.global_index).reshape(len(rows), dofs.m) if len(rows) else np.empty((0, dofs.m))
+    return block if dofs.comm.size == 1 else np.vstack(dofs.comm.allgather(block))
+
+
+class Reduced:
+    """One level's iteration on v = P u (module docstring): Newton steps, full or with the exact line search."""
+
+    def __init__(self, solver: CondensedNewtonSolver, scale: float) -> None:
+        self.solver, self.cond, self.dofs = solver, solver.cond, solver.dofs
+        self.problem = solver.problem
+        self.x, self.F = solver.reduced_work  # the full vector the forms read (u0 with v on B), and j there
+        self.scale = scale
+
+    def evaluate(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, bytes]:
+        """H(v), C_BB(v) and the active set's fingerprint (C_BB's bytes). Collective."""
+        problem, dofs, x = self.problem, self.dofs, self.x
+        self.cond.u0.copy(x)
+        x.array[dofs.local] = dofs.mine(v)
+        problem.sync(x)
+        contact = problem.contact
+        with self.F.localForm() as f:
+            f.set(0.0)
+        fpetsc.assemble_vector(self.F, contact.residual_form)
+        self.F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        jB = dofs.gather(self.F.array_r[dofs.local])
+        assemble_without_diagonal(contact.C, contact.jacobian_form, contact.bcs)
+        C = _block(contact.C, dofs, x.getOwnershipRange()[0])
+        H = v - self.cond.u0_B + self.cond.S @ jB
+        return H, C, C.tobytes()
+
+    def fnorm(self, H: np.ndarray) -> float:
+        """||F(u(v))|| = ||S^{-1} H||."""
+        return float(np.linalg.norm(sla.cho_solve(self.cond.chol, H)))
+
+    def run(self) -> tuple[int, np.ndarray]:
+        """Iterate from the current u's contact dofs; returns the iterations and v (converged or not: the full
+        iteration that follows decides)."""
+        cond, settings = self.cond, self.solver.settings
+        cond.u0_B = cond.level()
+        v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
+        H, C, key = self.evaluate(v)
+        fnorm, seen = self.fnorm(H), [key]
+        it = 0
+        unorm = max(self.problem.u.vector.norm(), 1e-300)
+        for it in range(settings.max_it * 8):
+            if fnorm <= settings.rtol * self.scale:
+                return it, v
+            d = -np.linalg.solve(np.eye(len(v)) + cond.S @ C, H)
+            y = v + d
+            Hy, Cy, keyy = self.evaluate(y)
+            if keyy == key and it == 0:  # the level's first step keeps u's active set: it is energy_newton's
+                return it, v  # first step, taken in the full space from u itself (exactly, by _polish)
+            lam = 1.0
+            if keyy != key:
+                fy = self.fnorm(Hy)
+                full = keyy not in seen and (len(seen) <= FREE_STEPS or fy < fnorm)
+                if not full:
+                    lam = self._line_minimum(v, d, H)
+            if lam < 1.0:
+                v = v + lam * d
+                H, C, key = self.evaluate(v)
+            else:
+                v, H, C, key = y, Hy, Cy, keyy
+            seen.append(key)
+            fnorm = self.fnorm(H)
+            if np.linalg.norm(d) <= settings.rtol * unorm:  # the step test of NewtonTest (on B's part of it)
+                return it + 1, v
+        return it + 1, v
+
+    def _line_minimum(self, v: np.ndarray, d: np.ndarray, H: np.ndarray) -> float:
+        """lam in (0, 1] minimizing E(v + lam d): the root of phi'(lam) = H(v + lam d).S^{-1} d (Illinois)."""
+        w = sla.cho_solve(self.cond.chol, d)
+
+        def dphi(lam: float) -> float:
+            return float(self.evaluate(v + lam * d)[0] @ w)
+
+        lo, flo, hi = 0.0, float(H @ w), 1.0
+        slope = flo
+        if slope >= 0.0:
+            return 1.0
+        fhi = dphi(hi)
+        if fhi <= 0.0:
+            return 1.0
+        side, lam = 0, 1.0
+        for _ in range(LINE_ITERATIONS):
+            lam = (lo * fhi - hi * flo) / (fhi - flo)
+            f = dphi(lam)
+            if abs(f) <= LINE_RTOL * abs(slope):
+                return lam
+            if f < 0.0:
+                lo, flo = lam, f
+                if side == -1:
+                    fhi *= 0.5
+                side = -1
+            else:
+                hi, fhi = lam, f
+                if side == 1:
+                    flo *= 0.5
+                side = 1
+        return lo if lo > 0.0 else lam
