@@ -176,13 +176,13 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         else:
             first = 0
         self.test.scale = scale
-        its, v = Reduced(self, scale).run()
+        its, v, step = Reduced(self, scale).run()
         self.reduced_iterations += its
         if its > 0:  # else the level starts from u itself, as energy_newton's would
             c = sla.cho_solve(self.cond.chol, self.cond.u0_B - v)
             self.cond.rebuild(c, self.problem.u.vector)
             self.problem.u.x.scatter_forward()
-        out = self._polish(its)
+        out = self._polish(its, step)
         if out.reason < 0:  # not settled by Newton steps solved through K: energy_newton's full iteration
             ksp = self.snes.getKSP()
             ksp.setOperators(self.problem.J, self.problem.J)
@@ -197,35 +197,55 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         return self._finish(out, name, scale)
 
 
-    def _polish(self, reduced: int) -> DampedResult:
+    def _woodbury_step(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec) -> float:
+        """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
+        the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d|. Two solves with K."""
+        problem, dofs, cond = self.problem, self.dofs, self.cond
+        assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
+        C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
+        cond.ksp.solve(F, d)  # K^{-1} F
+        dB = -np.linalg.solve(np.eye(dofs.m) + cond.S @ C, dofs.gather(d.array_r[dofs.local]))
+        d.scale(-1.0)
+        cond.add_column_solve(-(C @ dB), d)
+        d.array[dofs.local] = dofs.mine(dB)  # d_B itself (the contact term amplifies its error by 1/mu)
+        fpetsc.set_bc(d, problem.bcs, scale=0.0)
+        u.axpy(1.0, d)
+        return d.norm()
+
+    def _polish(self, reduced: int, step: float) -> DampedResult:
         """Full Newton steps from the rebuilt u, each solved through K (Woodbury: (K + P^T C P)^{-1} =
         K^{-1} - K^{-1} P^T (I + C S)^{-1} C P K^{-1}, no factorization), under plain Newton's test; at most
         POLISH_STEPS of them, taken in full (u is within round-off of the level's solution, the active set
-        settled). ``reduced``: the iterations done on v, counted first."""
+        settled). ``reduced``: the iterations done on v, counted first; ``step``: the norm of the last Newton step
+        on v (0 if none), which the first test is given like energy_newton's test after that step."""
         R = PETSc.SNES.ConvergedReason
-        problem, dofs, cond = self.problem, self.dofs, self.cond
+        problem = self.problem
         u, F, d = problem.u.vector, *self.reduced_work
         out = DampedResult(R.ITERATING, reduced, [np.nan] * reduced)
-        snorm = 0.0
+        snorm, after, keep, keep_norm = step, int(step > 0.0), None, 0.0
         for it in range(POLISH_STEPS + 1):
             problem.evaluate(u, F)
             out.history.append(F.norm())
-            out.reason = self.test(it, u.norm(), snorm, out.history[-1])
+            if keep is not None and out.history[-1] >= out.history[-2]:  # the steps stopped helping: back to
+                keep.copy(u)                                             # where v's step test had stopped
+                out.history[-1], out.reason = keep_norm, R.CONVERGED_SNORM_RELATIVE
+                break
+            out.reason = self.test(it + after, u.norm(), snorm, out.history[-1])
+            if out.reason == R.CONVERGED_SNORM_RELATIVE and it == 0 and after:
+                # stopped on v's step with F above the tolerance (near a kink of the energy): full steps are
+                # tried, as energy_newton's next ones would be, while they lower ||F||
+                keep, keep_norm = u.copy(), out.history[-1]
+                out.reason = R.ITERATING
             if out.reason != R.ITERATING:
                 break
             if it == POLISH_STEPS:
                 out.reason = R.DIVERGED_MAX_IT
+                if keep is not None:
+                    keep.copy(u)
+                    out.history[-1], out.reason = keep_norm, R.CONVERGED_SNORM_RELATIVE
                 break
             out.iterations += 1
-            assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
-            C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
-            cond.ksp.solve(F, d)  # y = K^{-1} F
-            z = np.linalg.solve(np.eye(dofs.m) + C @ cond.S, C @ dofs.gather(d.array_r[dofs.local]))
-            d.scale(-1.0)
-            cond.add_column_solve(z, d)  # d = -(y - K^{-1} P^T z)
-            fpetsc.set_bc(d, problem.bcs, scale=0.0)
-            u.axpy(1.0, d)
-            snorm = d.norm()
+            snorm = self._woodbury_step(u, F, d)
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         problem.u.x.scatter_forward()
         return out
@@ -266,28 +286,38 @@ class Reduced:
         H = v - self.cond.u0_B + self.cond.S @ jB
         return H, C, C.tobytes()
 
+    def step_test(self, v: np.ndarray, d: np.ndarray) -> bool:
+        """NewtonTest's step test, on the full space: the full Newton step K^{-1} P^T S^{-1} d (d: its part on
+        B) below rtol ||u(v)||, u(v) = u0 - K^{-1} P^T S^{-1} (P u0 - v). Two solves with K."""
+        cond, x = self.cond, self.x
+        x.set(0.0)
+        cond.add_column_solve(sla.cho_solve(cond.chol, d), x)
+        step = x.norm()
+        cond.rebuild(sla.cho_solve(cond.chol, cond.u0_B - v), x)
+        return step <= self.solver.settings.rtol * x.norm()
+
     def fnorm(self, H: np.ndarray) -> float:
         """||F(u(v))|| = ||S^{-1} H||."""
         return float(np.linalg.norm(sla.cho_solve(self.cond.chol, H)))
 
-    def run(self) -> tuple[int, np.ndarray]:
-        """Iterate from the current u's contact dofs; returns the iterations and v (converged or not: the full
-        iteration that follows decides)."""
+    def run(self) -> tuple[int, np.ndarray, float]:
+        """Iterate from the current u's contact dofs; returns the iterations, v (converged or not: the full
+        iteration that follows decides) and the norm of the last Newton step (0 if none)."""
         cond, settings = self.cond, self.solver.settings
         cond.u0_B = cond.level()
         v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
         H, C, key = self.evaluate(v)
         fnorm, seen = self.fnorm(H), [key]
-        it = 0
+        it, snorm = 0, 0.0
         unorm = max(self.problem.u.vector.norm(), 1e-300)
         for it in range(settings.max_it * 8):
             if fnorm <= settings.rtol * self.scale:
-                return it, v
+                return it, v, snorm
             d = -np.linalg.solve(np.eye(len(v)) + cond.S @ C, H)
             y = v + d
             Hy, Cy, keyy = self.evaluate(y)
             if keyy == key and it == 0:  # the level's first step keeps u's active set: it is energy_newton's
-                return it, v  # first step, taken in the full space from u itself (exactly, by _polish)
+                return it, v, 0.0  # first step, taken in the full space from u itself (exactly, by _polish)
             lam = 1.0
             if keyy != key:
                 fy = self.fnorm(Hy)
@@ -301,9 +331,10 @@ class Reduced:
                 v, H, C, key = y, Hy, Cy, keyy
             seen.append(key)
             fnorm = self.fnorm(H)
-            if np.linalg.norm(d) <= settings.rtol * unorm:  # the step test of NewtonTest (on B's part of it)
-                return it + 1, v
-        return it + 1, v
+            snorm = float(np.linalg.norm(d))  # B's part of the full step: the whole one only if this passes
+            if snorm <= settings.rtol * unorm and self.step_test(v, d):
+                return it + 1, v, snorm
+        return it + 1, v, snorm
 
     def _line_minimum(self, v: np.ndarray, d: np.ndarray, H: np.ndarray) -> float:
         """lam in (0, 1] minimizing E(v + lam d): the root of phi'(lam) = H(v + lam d).S^{-1} d (Illinois)."""
