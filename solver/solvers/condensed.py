@@ -176,13 +176,14 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         else:
             first = 0
         self.test.scale = scale
-        its, v, step = Reduced(self, scale).run()
+        history, v, step = Reduced(self, scale).run()
+        its = len(history)
         self.reduced_iterations += its
         if its > 0:  # else the level starts from u itself, as energy_newton's would
             c = sla.cho_solve(self.cond.chol, self.cond.u0_B - v)
             self.cond.rebuild(c, self.problem.u.vector)
             self.problem.u.x.scatter_forward()
-        out = self._polish(its, step)
+        out = self._polish(history, step)
         if out.reason < 0:  # not settled by Newton steps solved through K: energy_newton's full iteration
             ksp = self.snes.getKSP()
             ksp.setOperators(self.problem.J, self.problem.J)
@@ -196,8 +197,7 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         name = REASONS_SNES.get(out.reason, str(out.reason))
         return self._finish(out, name, scale)
 
-
-    def _woodbury_step(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec) -> float:
+    def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec) -> float:
         """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
         the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d|. Two solves with K."""
         problem, dofs, cond = self.problem, self.dofs, self.cond
@@ -212,16 +212,16 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         u.axpy(1.0, d)
         return d.norm()
 
-    def _polish(self, reduced: int, step: float) -> DampedResult:
-        """Full Newton steps from the rebuilt u, each solved through K (Woodbury: (K + P^T C P)^{-1} =
-        K^{-1} - K^{-1} P^T (I + C S)^{-1} C P K^{-1}, no factorization), under plain Newton's test; at most
-        POLISH_STEPS of them, taken in full (u is within round-off of the level's solution, the active set
-        settled). ``reduced``: the iterations done on v, counted first; ``step``: the norm of the last Newton step
-        on v (0 if none), which the first test is given like energy_newton's test after that step."""
+    def _polish(self, history: list[float], step: float) -> DampedResult:
+        """Full Newton steps from the rebuilt u, each solved through K (:meth:`_step_through_k`, no
+        factorization), under plain Newton's test; at most POLISH_STEPS of them, taken in full (u is within
+        round-off of the level's solution). ``history``: ||F|| before each iteration done on v (they are counted
+        first); ``step``: the norm of the last Newton step on v (0 if none), which the first test is given like
+        energy_newton's test after that step."""
         R = PETSc.SNES.ConvergedReason
         problem = self.problem
         u, F, d = problem.u.vector, *self.reduced_work
-        out = DampedResult(R.ITERATING, reduced, [np.nan] * reduced)
+        out = DampedResult(R.ITERATING, len(history), list(history))
         snorm, after, keep, keep_norm = step, int(step > 0.0), None, 0.0
         for it in range(POLISH_STEPS + 1):
             problem.evaluate(u, F)
@@ -245,7 +245,9 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
                     out.history[-1], out.reason = keep_norm, R.CONVERGED_SNORM_RELATIVE
                 break
             out.iterations += 1
-            snorm = self._woodbury_step(u, F, d)
+            snorm = self._step_through_k(u, F, d)
+        if keep is not None:
+            keep.destroy()
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         problem.u.x.scatter_forward()
         return out
@@ -300,24 +302,25 @@ class Reduced:
         """||F(u(v))|| = ||S^{-1} H||."""
         return float(np.linalg.norm(sla.cho_solve(self.cond.chol, H)))
 
-    def run(self) -> tuple[int, np.ndarray, float]:
-        """Iterate from the current u's contact dofs; returns the iterations, v (converged or not: the full
-        iteration that follows decides) and the norm of the last Newton step (0 if none)."""
+    def run(self) -> tuple[list[float], np.ndarray, float]:
+        """Iterate from the current u's contact dofs; returns ||F|| before each step taken (one per iteration),
+        v (converged or not: the full iteration that follows decides) and the norm of the last step (0 if none)."""
         cond, settings = self.cond, self.solver.settings
         cond.u0_B = cond.level()
         v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
         H, C, key = self.evaluate(v)
-        fnorm, seen = self.fnorm(H), [key]
-        it, snorm = 0, 0.0
+        fnorm, seen, history = self.fnorm(H), [key], []
+        snorm = 0.0
         unorm = max(self.problem.u.vector.norm(), 1e-300)
         for it in range(settings.max_it * 8):
             if fnorm <= settings.rtol * self.scale:
-                return it, v, snorm
+                return history, v, snorm
             d = -np.linalg.solve(np.eye(len(v)) + cond.S @ C, H)
             y = v + d
             Hy, Cy, keyy = self.evaluate(y)
-            if keyy == key and it == 0:  # the level's first step keeps u's active set: it is energy_newton's
-                return it, v, 0.0  # first step, taken in the full space from u itself (exactly, by _polish)
+            if keyy == key:  # the step keeps v's active set: it solves v's quadratic piece, and is taken in the
+                return history, v, snorm  # full space by _polish (from u itself on the level's first iteration)
+            history.append(fnorm)
             lam = 1.0
             if keyy != key:
                 fy = self.fnorm(Hy)
@@ -333,8 +336,8 @@ class Reduced:
             fnorm = self.fnorm(H)
             snorm = float(np.linalg.norm(d))  # B's part of the full step: the whole one only if this passes
             if snorm <= settings.rtol * unorm and self.step_test(v, d):
-                return it + 1, v, snorm
-        return it + 1, v, snorm
+                return history, v, snorm
+        return history, v, snorm
 
     def _line_minimum(self, v: np.ndarray, d: np.ndarray, H: np.ndarray) -> float:
         """lam in (0, 1] minimizing E(v + lam d): the root of phi'(lam) = H(v + lam d).S^{-1} d (Illinois)."""
