@@ -46,6 +46,7 @@ NS = [8, 16]
 VARIANTS = {
     "newton": ["solver.method='newton'"],
     "newton_energy": ["solver.method='newton_energy'"],
+    "newton_condensed": ["solver.method='newton_condensed'"],
     "penalty_duality": ["solver.method='penalty_duality'"],
     "fixed_point": ["solver.method='fixed_point'"],
     "newton+semi_implicit_damage": ["solver.method='newton'", "solver.damage_scheme='semi_implicit'"],
