@@ -312,7 +312,7 @@ class Reduced:
         fnorm, seen, history = self.fnorm(H), [key], []
         snorm = 0.0
         unorm = max(self.problem.u.vector.norm(), 1e-300)
-        for it in range(settings.max_it * 8):
+        for _ in range(settings.max_it * 8):
             if fnorm <= settings.rtol * self.scale:
                 return history, v, snorm
             d = -np.linalg.solve(np.eye(len(v)) + cond.S @ C, H)
