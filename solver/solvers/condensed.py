@@ -16,9 +16,13 @@ H is the gradient, times S, of the level's energy restricted to the displacement
 unchanged: the semismooth Newton step d = -(I + S C_BB)^{-1} H (C_BB: the contact Jacobian on B), taken in full
 where the active set stays, or to a new active set early in the level or with a smaller residual, else the exact
 line search on E along d (phi'(lam) = H(v + lam d).S^{-1} d). The same iterates, nearly, but each costs a
-facet assembly and an m x m dense solve instead of a sparse factorization. Then u is rebuilt by one solve with K and
-the level's residual checked by energy_newton's full iteration (which takes a full Newton step only where the
-condensed u does not already meet the test): the same equations to the same tolerance.
+facet assembly and an m x m dense solve instead of a sparse factorization. A step that keeps v's active set (it
+solves v's quadratic piece) is not taken on v: u is rebuilt from v by one solve with K (from u itself if no step was
+taken) and the step taken in the full space, d_B = -(I + S C_BB)^{-1} P K^{-1} F, d = -K^{-1} (F + P^T C d_B)
+elsewhere (two solves with K; d_B written as is, 1/mu amplifying its error), which also corrects the rebuild's
+round-off on B (about 1e-6 in ||F||). Plain Newton's test decides, on the full F: the same equations to the same
+tolerance. A level these full steps do not settle in POLISH_STEPS goes to energy_newton's iteration, with
+factorizations of K + C.
 
 Only where it applies (:func:`applies`): a contact energy (no implicit memory term), a piecewise linear law, a
 direct linear solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the method is newton_energy.
