@@ -37,6 +37,10 @@ from solver.solvers.linear import (
     rigid_body_modes,
 )
 
+# the near-nullspace of the iterative path without the rigid motions' normal component on Gamma_C (False: the plain
+# rigid motions; studies/krylov_contact.py compares the two)
+CONTACT_NEAR_NULLSPACE = True
+
 
 class NewtonTest:
     """The project's convergence test: ||F|| <= rtol * scale, or ||du|| <= rtol ||u|| after a Newton step.
@@ -116,8 +120,10 @@ class NewtonSolver:
         self.krylov_tolerance = KrylovTolerance(settings.rtol, self.iterative, self.prefix, settings.petsc_options)
         self.test = NewtonTest(settings.rtol, settings.max_it, self.cycles, contact)
         if self.iterative:
-            # CG + GAMG on J with the rigid motions as near-nullspace; each Newton correction starts from zero
-            self._nullspace = rigid_body_modes(problem.u.function_space)
+            # CG + AMG on J with the rigid motions as near-nullspace (their normal component taken out on Gamma_C,
+            # where the contact penalty holds u . n: linear.rigid_body_modes)
+            normals = contact.nodal_normals() if contact is not None and CONTACT_NEAR_NULLSPACE else None
+            self._nullspace = rigid_body_modes(problem.u.function_space, normals)
             problem.J.setNearNullSpace(self._nullspace)
         defaults = newton_options(comm, problem, settings)
         check_options(comm, self.prefix, defaults, settings.petsc_options, snes=True)
