@@ -93,23 +93,20 @@ class ContactTerm:
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
         self.piecewise_linear = all(p.law != "power" for p in parts)
-        # int_Gamma_C n . w ds: the directions of the contact's normal, averaged at Gamma_C's nodes (nodal_normals)
-        self._normal_form = fem.form(sum(ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree) for p in parts))
+        # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness)
+        self._normal_form = fem.form(sum((1.0 / p.mu) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
+                                         for p in parts))
 
-    def nodal_normals(self) -> np.ndarray:
-        """The unit normal of Gamma_C at each of its nodes (the facet normals averaged with the weights int phi_i ds),
-        zero elsewhere: an array (nodes, d) over the local nodes, ghosts included. The iterative solver's
-        near-nullspace takes the normal component out of the rigid motions there (linear.rigid_body_modes)."""
-        vec = fpetsc.assemble_vector(self._normal_form)
-        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        with vec.localForm() as local:
-            n = local.array.reshape(-1, self.C.getBlockSize() or 1).copy()
-        vec.destroy()
-        norm = np.linalg.norm(n, axis=1)
-        on = norm > 0.0
-        n[on] /= norm[on, None]
-        return n
+    def normal_stiffness(self, out: PETSc.Vec) -> None:
+        """out = int_Gamma_C (1/mu) n . w ds, ghosts included: at each node of Gamma_C a vector along the normal (the
+        facet normals averaged with the weights int phi_i ds) whose length is the scale (1/mu) int phi_i ds of the
+        contact's stiffness there (the linear law's; 1/mu is the scale of the other laws too); zero elsewhere.
+        The iterative solver's near-nullspace reads it (newton.contact_normals)."""
+        with out.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(out, self._normal_form)
+        out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        out.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def add_residual(self, F: PETSc.Vec) -> float:
         """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""

@@ -16,8 +16,11 @@ def _model(comm, n: int = 4):
 
 
 def test_contact_normals_are_the_bottom_normal_on_gamma_c_and_zero_elsewhere(comm):
+    """mu = 1e-10: every node of Gamma_C holds u . n (the contact is stiff against K), its normal -z."""
+    from solver.solvers.newton import contact_normals
+
     model = _model(comm)
-    n = model.mech.contact.nodal_normals()
+    n = contact_normals(model.mech.problem)
     z = model.u.function_space.tabulate_dof_coordinates()[:, 2]
     bottom = np.isclose(z, 0.0)
     assert np.allclose(n[bottom], [0.0, 0.0, -1.0], atol=1e-12) and not n[~bottom].any()
@@ -57,3 +60,13 @@ def test_stiff_contact_takes_fewer_krylov_iterations_with_the_contact_near_nulls
     default = krylov_contact.run_case(8, 1e-10, "contact")
     assert default["steps"] < 0.8 * rigid["steps"], (default, rigid)
     assert default["contact_force"] == pytest.approx(rigid["contact_force"], rel=1e-7)
+
+
+def test_soft_contact_keeps_the_rigid_motions(comm):
+    """mu = 1e-3 (1/mu int phi ds 0.05 K's diagonal at n = 4): the contact does not hold u . n, no normal is taken out."""
+    from solver.solvers.newton import contact_normals
+
+    cfg = load(REPO / "configs" / "example1_3d.toml", ["mesh.nx=4", "mesh.ny=4", "mesh.nz=4", "time.T=0.02",
+                                                       "output.xdmf=false", "solver.linear='iterative'",
+                                                       "boundary.bottom.mu=0.001"])
+    assert not contact_normals(build_model(cfg, comm).mech.problem).any()
