@@ -70,3 +70,21 @@ def test_soft_contact_keeps_the_rigid_motions(comm):
                                                        "output.xdmf=false", "solver.linear='iterative'",
                                                        "boundary.bottom.mu=0.001"])
     assert not contact_normals(build_model(cfg, comm).mech.problem).any()
+
+
+def test_power_law_contact_keeps_the_rigid_motions(comm):
+    """The power law has no fixed stiffness to compare with K's: its nodes keep the rigid motions (and the unused
+    default mu = 1e-10 of its part is not read)."""
+    import tomllib
+
+    from solver.config import from_dict
+    from solver.solvers.newton import contact_normals
+
+    scene = tomllib.loads((REPO / "configs" / "example1_3d.toml").read_text())
+    scene["mesh"].update(nx=4, ny=4, nz=4)
+    scene["time"]["T"] = 0.02
+    scene["solver"] = {"linear": "iterative"}
+    bottom = scene["boundary"]["bottom"]
+    del bottom["mu"]
+    bottom.update(law="power", coefficient=1e3, exponent=2.0)
+    assert not contact_normals(build_model(from_dict(scene), comm).mech.problem).any()
