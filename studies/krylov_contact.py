@@ -5,7 +5,10 @@ level 0 and 3 steps of k = 0.02, nothing written) with the normal compliance mu 
 (the scene's is 1e-10: a contact stiffness 1/mu = 1e10 against E = 100), each case in its own process, and
 reports the Krylov iterations per linear solve. The plain elasticity solve of the same cube (no contact,
 studies/anchor.py) takes 17-19 CG iterations at these sizes; if the iterations fall toward it as mu grows,
-the stiff contact block is what costs them. Written to ``krylov_contact.md`` with ``--output``.
+the stiff contact block is what costs them. ``--nullspace rigid contact`` runs each case with either
+near-nullspace of the AMG: the plain rigid motions, or the rigid motions without their normal component on Gamma_C
+(the solver's default, linear.rigid_body_modes), alternating, and reports the iterations and the displacement
+solve's time per step of both. Written to ``krylov_contact.md`` with ``--output``.
 """
 
 from __future__ import annotations
@@ -13,42 +16,60 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 from pathlib import Path
 
 from studies import REPO as ROOT
 
+NULLSPACES = ("rigid", "contact")
 
-def run_case(n: int, mu: float) -> dict:
-    """One case in this process: Krylov iterations per solve at level 0 and over the steps, the contact force."""
+
+def run_case(n: int, mu: float, nullspace: str = "contact") -> dict:
+    """One case in this process: Krylov iterations per solve at level 0 and over the steps, the displacement
+    solve's time per step (median), the contact force."""
     from mpi4py import MPI
 
     from solver.config import load
     from solver.io.results import run
     from solver.run.model import build_model
+    from solver.solvers import newton
+
+    newton.CONTACT_NEAR_NULLSPACE = nullspace == "contact"
 
     cfg = load(ROOT / "configs" / "example1_3d.toml",
-               [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.06", "output.xdmf=false",
+               [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.1", "output.xdmf=false",
                 "solver.linear='iterative'", f"boundary.bottom.mu={mu!r}"])
     rows = run(build_model(cfg, MPI.COMM_WORLD), None)
     steps = rows[1:]
-    return {"n": n, "mu": mu, "dofs": 3 * (n + 1) ** 3,
+    return {"n": n, "mu": mu, "nullspace": nullspace, "dofs": 3 * (n + 1) ** 3,
+            "step_s": statistics.median(r["time_displacement"] for r in steps),
             "level0": rows[0]["krylov_iterations"] / rows[0]["linear_solves"],
             "steps": sum(r["krylov_iterations"] for r in steps) / sum(r["linear_solves"] for r in steps),
             "contact_force": rows[-1]["contact_force"]}
 
 
-def table(cases: list[dict]) -> str:
+def table(cases: list[dict], repeat: int = 1) -> str:
+    sizes = " ".join(str(n) for n in sorted({c["n"] for c in cases}))
+    mus = " ".join(repr(m) for m in sorted({c["mu"] for c in cases}))
+    spaces = " ".join(dict.fromkeys(c["nullspace"] for c in cases))
     lines = ["# Krylov iterations against the contact stiffness (3-D Example 1, iterative, one process)", "",
-             "Command: `python -m studies.krylov_contact --sizes " + " ".join(str(n) for n in sorted({c['n'] for c in cases}))
-             + " --mu " + " ".join(repr(m) for m in sorted({c['mu'] for c in cases})) + " --output benchmarks/results`. "
-             "The scene's mu is 1e-10; the plain elasticity solve (no contact) takes 17-19 iterations "
-             "(scaling.md).", "", "| n | dofs | mu | 1/mu | Krylov its / solve, level 0 | steps | contact force at T |",
-             "|---|---|---|---|---|---|---|"]
-    for c in sorted(cases, key=lambda c: (c["n"], c["mu"])):
-        lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {1 / c['mu']:g} | {c['level0']:.1f} | {c['steps']:.1f} "
-                     f"| {c['contact_force']:.6g} |")
+             f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --nullspace {spaces} --repeat {repeat} "
+             "--output benchmarks/results`. Level 0 and 5 steps of k = 0.02. The scene's mu is 1e-10; the plain "
+             "elasticity solve (no contact) takes 17-19 iterations (scaling.md). Near-nullspace `rigid`: the six rigid "
+             "motions; `contact`: the same without their normal component on Gamma_C (the default). The two of a "
+             f"case ran one after the other, alternating, {repeat} time(s) each, on a shared 2-core machine; the step "
+             "time is the median displacement solve of the 5 steps (and of the repeats), its ratio taken within the "
+             "pair. Absolute times are not comparable between rows.", "",
+             "| n | dofs | mu | near-nullspace | Krylov its / solve, level 0 | steps | step time / rigid's "
+             "| contact force at T |", "|---|---|---|---|---|---|---|---|"]
+    rigid = {(c["n"], c["mu"]): c["step_s"] for c in cases if c["nullspace"] == "rigid"}
+    for c in sorted(cases, key=lambda c: (c["n"], c["mu"], NULLSPACES.index(c["nullspace"]))):
+        ref = rigid.get((c["n"], c["mu"]))
+        ratio = f"{c['step_s'] / ref:.2f}" if ref else "-"
+        lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {c['nullspace']} | {c['level0']:.1f} | "
+                     f"{c['steps']:.1f} | {ratio} | {c['contact_force']:.6g} |")
     return "\n".join(lines) + "\n"
 
 
@@ -56,20 +77,28 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m studies.krylov_contact", description=__doc__.splitlines()[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[14, 22])
     p.add_argument("--mu", type=float, nargs="+", default=[1e-10, 1e-6, 1e-3])
+    p.add_argument("--nullspace", nargs="+", choices=NULLSPACES, default=list(NULLSPACES))
+    p.add_argument("--repeat", type=int, default=1, help="runs of each case, alternating (step time: their median)")
     p.add_argument("--output", default=None)
     a = p.parse_args(argv)
     bad = [(f"--sizes {n}", "must be >= 1") for n in a.sizes if n < 1] + [(f"--mu {m:g}", "must be > 0") for m in a.mu if m <= 0]
+    bad += [(f"--repeat {a.repeat}", "must be >= 1")] if a.repeat < 1 else []
     if bad:
         print(f"error: {bad[0][0]}: {bad[0][1]}", file=sys.stderr)
         return 2
     cases = []
     for n in a.sizes:
         for mu in a.mu:
-            res = subprocess.run([sys.executable, "-m", "studies.krylov_contact", "case", str(n), repr(mu)],
-                                 capture_output=True, text=True, cwd=ROOT, env=dict(os.environ), check=True)
-            cases.append(json.loads(res.stdout.strip().splitlines()[-1]))
-            print(json.dumps(cases[-1]), flush=True)
-    text = table(cases)
+            runs: dict[str, list[dict]] = {space: [] for space in a.nullspace}
+            for _ in range(a.repeat):  # A B A B: the step times of a pair side by side
+                for space in a.nullspace:
+                    res = subprocess.run([sys.executable, "-m", "studies.krylov_contact", "case", str(n), repr(mu), space],
+                                         capture_output=True, text=True, cwd=ROOT, env=dict(os.environ), check=True)
+                    runs[space].append(json.loads(res.stdout.strip().splitlines()[-1]))
+                    print(json.dumps(runs[space][-1]), flush=True)
+            for rs in runs.values():
+                cases.append({**rs[0], "step_s": statistics.median(r["step_s"] for r in rs)})
+    text = table(cases, a.repeat)
     print(text)
     if a.output:
         Path(a.output, "krylov_contact.md").write_text(text)
@@ -77,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "case":
-        print(json.dumps(run_case(int(sys.argv[2]), float(sys.argv[3]))))
+    if len(sys.argv) == 5 and sys.argv[1] == "case":
+        print(json.dumps(run_case(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4])))
         raise SystemExit(0)
     raise SystemExit(main())

@@ -95,11 +95,11 @@ def measure(n: int, linear: str) -> dict:
             "stages_mib": stages, "arrays": arrays_held(model), "matrices": petsc_matrices()}
 
 
-def report(m: dict) -> str:
+def report(m: dict, output: str = "benchmarks/results") -> str:
     dofs = m["dofs"]
     per = lambda mib: f"{mib * 2 ** 20 / dofs:,.0f}"  # noqa: E731
     lines = [f"# Memory of 3-D Example 1, n = {m['n']} ({dofs:,} dofs), {m['solver']}, one process", "",
-             f"Command: `python -m studies.memory3d {m['n']} {m['solver']} --output benchmarks/results`.", "",
+             f"Command: `python -m studies.memory3d {m['n']} {m['solver']} --output {output}`.", "",
              "| stage | resident (MiB) | growth over the previous stage (B/dof) |", "|---|---|---|"]
     prev = None
     for stage, mib in m["stages_mib"].items():
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.n < 1:
         print(f"error: n {a.n}: must be >= 1", file=sys.stderr)
         return 2
-    text = report(measure(a.n, a.solver))
+    text = report(measure(a.n, a.solver), a.output or "DIR")
     print(text)
     if a.output:
         Path(a.output, "memory_3d.md").write_text(text)

@@ -93,6 +93,23 @@ class ContactTerm:
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
         self.piecewise_linear = all(p.law != "power" for p in parts)
+        # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
+        # the power law has no fixed stiffness (p'(r) = c m r^(m-1)) and is left out
+        stiff = [p for p in parts if p.law in ("linear", "limited_penetration")]
+        self._normal_form = fem.form(sum((1.0 / p.mu) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
+                                         for p in stiff)) if stiff else None
+
+    def normal_stiffness(self, out: PETSc.Vec) -> None:
+        """out = int_Gamma_C (1/mu) n . w ds, ghosts included: at each node of Gamma_C a vector along the normal (the
+        facet normals averaged with the weights int phi_i ds) whose length is the scale (1/mu) int phi_i ds of the
+        contact's stiffness there (the linear and limited-penetration laws' 1/mu); zero elsewhere and on parts with
+        the power law. The iterative solver's near-nullspace reads it (newton.contact_normals)."""
+        with out.localForm() as local:
+            local.set(0.0)
+        if self._normal_form is not None:
+            fpetsc.assemble_vector(out, self._normal_form)
+        out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        out.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def add_residual(self, F: PETSc.Vec) -> float:
         """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
@@ -34,6 +35,44 @@ class SolveInfo:
     krylov_iterations: int = 0
 
 
+class StiffnessRows:
+    """K's rows where the contact Jacobian C can be nonzero (its pattern's rows), kept apart so that the Jacobian
+    J = K + C can live in K's own storage (issue 30: one stiffness-pattern matrix instead of two, 0.5 KB per 3-D
+    dof). Off these rows J is K exactly, bit for bit; on them :meth:`restore` writes K's values back before the
+    next C is added, and :meth:`mult_add` forms K x there from the rows kept here. A few rows: those of the cells
+    on Gamma_C."""
+
+    def __init__(self, K: PETSc.Mat, contact: ContactTerm, bcs) -> None:
+        C = contact.C
+        assemble_without_diagonal(C, contact.jacobian_form, bcs)  # C's pattern (every cell entry is inserted)
+        indptr, _, _ = C.getValuesCSR()
+        start, end = K.getOwnershipRange()
+        rows = (start + np.flatnonzero(np.diff(indptr))).astype(PETSc.IntType)  # owned rows of C's pattern
+        comm = K.getComm()
+        self.rows = PETSc.IS().createGeneral(rows, comm=comm)
+        self.K = K.createSubMatrix(self.rows, PETSc.IS().createStride(end - start, start, 1, comm=comm))
+        self.csr = self.K.getValuesCSR()  # K's values on those rows (global columns), written back by restore
+        self.global_rows = rows
+        self._Fc = self.K.createVecLeft()
+        self._scatter: PETSc.Scatter | None = None
+
+    def restore(self, J: PETSc.Mat) -> None:
+        """Put K's values back on the kept rows of J (which holds K + C there)."""
+        indptr, cols, vals = self.csr
+        J.setValuesIJV(indptr, cols, vals, addv=PETSc.InsertMode.INSERT_VALUES, rowmap=self.global_rows)
+        J.assemble()
+
+    def mult_add(self, J: PETSc.Mat, x: PETSc.Vec, F: PETSc.Vec) -> None:
+        """F += K x, with J = K off the kept rows (J x there) and K's kept rows on them."""
+        if self._scatter is None:
+            self._scatter = PETSc.Scatter().create(F, self.rows, self._Fc, None)
+        sc, Fc = self._scatter, self._Fc
+        sc.scatter(F, Fc, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.FORWARD)
+        J.multAdd(x, F, F)
+        self.K.multAdd(x, Fc, Fc)
+        sc.scatter(Fc, F, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.REVERSE)
+
+
 class DisplacementProblem:
     """Residual and Jacobian of the level's displacement problem, and the state carried between levels.
 
@@ -49,7 +88,10 @@ class DisplacementProblem:
             Fm = implicit_term(u, ops.w)
             self.Fm, self.am = fem.form(Fm), fem.form(ufl.derivative(Fm, u, ops.du))
             self.Am = ops.K.duplicate()
-        self.J = ops.K.duplicate(copy=True) if (contact is not None or self.Fm is not None) else ops.K
+        # with contact only, J = K + C shares K's storage (StiffnessRows keeps K's rows under C); with the implicit
+        # memory term, whose Jacobian touches every row, J is a copy of K
+        self.kept = StiffnessRows(ops.K, contact, self.bcs) if contact is not None and self.Fm is None else None
+        self.J = ops.K.duplicate(copy=True) if self.Fm is not None else ops.K
         # with the truncation acting, the implicit memory term's Jacobian is not symmetric
         self.symmetric = self.Fm is None
         self.J.setOption(PETSc.Mat.Option.SYMMETRIC, self.symmetric)
@@ -98,7 +140,10 @@ class DisplacementProblem:
         if self.Fm is not None:
             fpetsc.assemble_vector(F, self.Fm)
             F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        self.ops.K.multAdd(x, F, F)
+        if self.kept is not None:
+            self.kept.mult_add(self.J, x, F)
+        else:
+            self.ops.K.multAdd(x, F, F)
         F.axpy(-1.0, self.ops.b)
         fpetsc.set_bc(F, self.bcs, x, -1.0)
         F.copy(self.F_last)
@@ -119,6 +164,6 @@ class DisplacementProblem:
         self.sync(x)
         if not self.contact.assemble_jacobian():
             return False
-        self.ops.K.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self.kept.restore(self.J)
         self.J.axpy(1.0, self.contact.C, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         return True

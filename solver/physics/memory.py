@@ -91,7 +91,6 @@ class PronyHistory(History):
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
         if extrapolated:  # H(u*) from the strains of u_{n-1} and u_{n-2}, kept by the source
             source.retain(2)
-        self._h = np.empty_like(self.M.x.array)  # H of a level, then its increment (no temporaries per step)
         self._sum: float | None = None  # the sum of M, taken where M was last written (still in cache)
         # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
         self.current_weight: fem.Constant | None = None
@@ -102,6 +101,8 @@ class PronyHistory(History):
         self.decay = np.array([math.exp(-k / t) if math.isfinite(t) else 1.0 for t in taus])
         # one term: M itself is the term; several: one array per term
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
+        # several terms: H of a level, then its increment (no temporaries per step); one term needs none
+        self._h = np.empty_like(self.M.x.array) if self.terms is not None else None
 
     def commit(self, n: int) -> None:
         half = self.sum_rule.first_weight if n == 0 else 1.0

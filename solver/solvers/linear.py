@@ -154,9 +154,15 @@ def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elas
     return direct_options(comm, kind, symmetric)
 
 
-def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
+def rigid_body_modes(V: fem.FunctionSpace, normals: np.ndarray | None = None) -> PETSc.NullSpace:
     """The rigid motions of a vector P-k space (3 in 2-D, 6 in 3-D), orthonormalized: GAMG's near-nullspace
-    (built as in dolfinx's demo_elasticity.py)."""
+    (built as in dolfinx's demo_elasticity.py).
+
+    ``normals`` (nodes, d; unit rows on the contact boundary, zero elsewhere): the rigid motions' normal component
+    is taken out at those nodes, v <- v - (v . n) n. The contact penalty 1/mu (1e10) makes u . n there nearly a
+    constraint, and a rigid motion that moves Gamma_C along its normal is no near-nullspace vector of J: with it
+    the Krylov iterations per solve grew with the mesh (31 at 107,811 dofs against the plain solve's 19,
+    benchmarks/results/krylov_contact.md); without it they stay at the plain solve's. Issue 30."""
 
     imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     dim = V.mesh.geometry.dim
@@ -176,6 +182,12 @@ def rigid_body_modes(V: fem.FunctionSpace) -> PETSc.NullSpace:
             for m, (a, b) in zip((3, 4, 5), ((0, 1), (1, 2), (2, 0))):
                 vecs[m][dofs[a]] = -xs[b]
                 vecs[m][dofs[b]] = xs[a]
+        if normals is not None:
+            on = np.flatnonzero(np.any(normals != 0.0, axis=1))
+            n = normals[on]
+            for v in vecs:
+                nodes = v.reshape(-1, bs)[:, :dim]  # a view: written in place
+                nodes[on] -= np.sum(nodes[on] * n, axis=1)[:, None] * n
     la.orthonormalize(basis)
     return PETSc.NullSpace().create(vectors=basis, comm=V.mesh.comm)
 

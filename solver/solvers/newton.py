@@ -37,6 +37,36 @@ from solver.solvers.linear import (
     rigid_body_modes,
 )
 
+# the near-nullspace of the iterative path without the rigid motions' normal component on Gamma_C (False: the plain
+# rigid motions; studies/krylov_contact.py compares the two)
+CONTACT_NEAR_NULLSPACE = True
+
+
+# a node of Gamma_C holds u . n (its normal leaves the near-nullspace) where the contact's stiffness (1/mu) int phi ds
+# is this many times K's diagonal there: 3-D Example 1 has 5e5 at mu = 1e-10 (n = 32), 0.05 at mu = 1e-3, where taking
+# the normal out cost level 0 iterations (16.7 -> 29 at 36,501 dofs, benchmarks/results/krylov_contact.md)
+STIFF_CONTACT_RATIO = 100.0
+
+
+def contact_normals(problem: DisplacementProblem) -> np.ndarray:
+    """The unit normal (nodes, d; ghosts included) at the nodes of Gamma_C where the contact is stiff against K
+    (:data:`STIFF_CONTACT_RATIO`), zero elsewhere: the nodes whose normal motion linear.rigid_body_modes takes out."""
+    N, diag = problem.ops.b.duplicate(), problem.ops.b.duplicate()
+    problem.contact.normal_stiffness(N)
+    problem.ops.K.getDiagonal(diag)
+    diag.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    bs = problem.u.function_space.dofmap.index_map_bs
+    with N.localForm() as n_local, diag.localForm() as d_local:
+        n = n_local.array.reshape(-1, bs).copy()
+        k = np.abs(d_local.array.reshape(-1, bs)).mean(axis=1)
+    N.destroy()
+    diag.destroy()
+    stiffness = np.linalg.norm(n, axis=1)
+    stiff = stiffness > STIFF_CONTACT_RATIO * k
+    n[~stiff] = 0.0
+    n[stiff] /= stiffness[stiff, None]
+    return n
+
 
 class NewtonTest:
     """The project's convergence test: ||F|| <= rtol * scale, or ||du|| <= rtol ||u|| after a Newton step.
@@ -116,8 +146,10 @@ class NewtonSolver:
         self.krylov_tolerance = KrylovTolerance(settings.rtol, self.iterative, self.prefix, settings.petsc_options)
         self.test = NewtonTest(settings.rtol, settings.max_it, self.cycles, contact)
         if self.iterative:
-            # CG + GAMG on J with the rigid motions as near-nullspace; each Newton correction starts from zero
-            self._nullspace = rigid_body_modes(problem.u.function_space)
+            # CG + AMG on J with the rigid motions as near-nullspace (their normal component taken out on Gamma_C,
+            # where the contact penalty holds u . n: linear.rigid_body_modes)
+            normals = contact_normals(problem) if contact is not None and CONTACT_NEAR_NULLSPACE else None
+            self._nullspace = rigid_body_modes(problem.u.function_space, normals)
             problem.J.setNearNullSpace(self._nullspace)
         defaults = newton_options(comm, problem, settings)
         check_options(comm, self.prefix, defaults, settings.petsc_options, snes=True)

@@ -46,3 +46,23 @@ def test_contact_functionals_equal_their_integrals(comm):
     assert row["contact_force"] == pytest.approx(comm.allreduce(fem.assemble_scalar(force), op=MPI.SUM), rel=1e-12)
     assert row["contact_length"] == pytest.approx(1.0)  # the whole bottom is pressed
     assert row["max_penetration"] > 0.0
+
+
+def test_contact_traces_factor_only_the_contact_boundary(comm):
+    """The boundary mass matrix of λ_h is factored on the dofs of Γ_C alone (issue 30, memory): 49 rows on the 6^3
+    cube, where the whole space's 343 (identity off Γ_C, but every cell's couplings in its pattern) filled like a
+    3-D stiffness matrix; λ_h is still the pressure (its integral over Γ_C is the contact force)."""
+    from solver.config import load
+    from studies import REPO
+
+    cfg = load(REPO / "configs" / "example1_3d.toml", ["mesh.nx=6", "mesh.ny=6", "mesh.nz=6", "time.T=0.02",
+                                                       "output.xdmf=false", "solver.linear='mumps'"])
+    model = build_model(cfg, comm)
+    row = Stepper(model).step(0)
+    traces = model.mech.diagnostics.traces
+    on = comm.allreduce(int(np.sum(traces.on < traces.pressure.function_space.dofmap.index_map.size_local)))
+    size = traces.ksp.getOperators()[0].getSize()[0]
+    assert size == on == 7 * 7
+    traces.update_pressure()
+    force = comm.allreduce(fem.assemble_scalar(fem.form(traces.pressure * model.geo.ds(model.geo.tags["bottom"]))))
+    assert force == pytest.approx(row["contact_force"], rel=1e-9) and row["contact_force"] > 0

@@ -33,3 +33,24 @@ def test_strain_operator_holds_no_unsummed_duplicates():
     E = build_model(cfg, MPI.COMM_WORLD).history.H.strain_operator
     assert memory3d._allocated(E.data) == E.nnz * E.data.itemsize
     assert memory3d._allocated(E.indices) == E.nnz * E.indices.itemsize
+
+
+def test_memory_term_keeps_one_operator_and_no_idle_buffers():
+    """Issue 30, memory: besides the strain operator E, the memory term of 3-D Example 1 (one Prony term, order 1)
+    holds at most five arrays of M's size (M, the kept strain, A eps, the force's W m, zeta at the points and
+    the weights are each M's or smaller); E^T W stored beside E, the idle extrapolation buffer and the
+    several-term increment took four more."""
+    from mpi4py import MPI
+
+    from solver.config import load
+    from solver.run.model import build_model
+    from studies import REPO
+
+    cfg = load(REPO / "configs" / "example1_3d.toml", ["mesh.nx=4", "mesh.ny=4", "mesh.nz=4", "time.T=0.04",
+                                                       "output.xdmf=false"])
+    model = build_model(cfg, MPI.COMM_WORLD)
+    held = memory3d.arrays_held(model)
+    M = held["model.history.M.x"]
+    memory = {k: v for k, v in held.items() if k.startswith(("model.history", "model.mech.ops._memory_force"))
+              and "strain_operator" not in k}
+    assert sum(memory.values()) <= 5 * M, sorted(memory.items(), key=lambda kv: -kv[1])
