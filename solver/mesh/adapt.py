@@ -17,7 +17,7 @@ import ufl
 from dolfinx import cpp
 from dolfinx import mesh as dmesh
 
-from solver.mesh.geometry import Geometry
+from solver.mesh.geometry import Geometry, equispaced
 
 
 def _segments(geo: Geometry) -> tuple[np.ndarray, np.ndarray]:
@@ -41,7 +41,7 @@ def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     mesh.topology.create_connectivity(tdim, 1)
     c2e = mesh.topology.connectivity(tdim, 1)
     edges = np.unique(c2e.array.reshape(-1, 3)[np.asarray(cells, dtype=np.int32)]).astype(np.int32)
-    new = dmesh.refine(mesh, edges, redistribute=False)
+    new = equispaced(dmesh.refine(mesh, edges, redistribute=False))  # refine copies the parent's element as it is now
     fdim = tdim - 1
     new.topology.create_connectivity(fdim, tdim)
     exterior = cpp.mesh.exterior_facet_indices(new.topology)

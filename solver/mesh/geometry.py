@@ -82,12 +82,30 @@ def _side_marker(side: str, corners, interval, tol: float):
     return marker
 
 
+def equispaced(msh: dmesh.Mesh) -> dmesh.Mesh:
+    """The mesh with its UFL coordinate element marked ``variant="equispaced"`` from the start.
+
+    FFCx 0.5 marks it so itself, in place on the mesh's UFL domain, when it first compiles a form on that mesh
+    (``ffcx/analysis.py``), after that form's signature was taken. The signatures of the forms made after then
+    depend on whether an earlier form was compiled (the domain mutated) or found in the disk cache (not): on an
+    empty cache the same model built twice named a form differently (issue 32, item 15). Marked at creation,
+    every signature is the same whatever the cache holds. The variant changes no number of a degree-1 geometry
+    (its only nodes are the vertices); ``dolfinx.io.gmshio`` already makes its meshes this way.
+    """
+    element = msh.ufl_domain().ufl_coordinate_element()
+    sub = element.sub_elements()[0]
+    if sub.variant() is not None:
+        return msh
+    sub = ufl.FiniteElement(sub.family(), sub.cell(), sub.degree(), sub.quadrature_scheme(), variant="equispaced")
+    return dmesh.Mesh(msh._mesh, ufl.Mesh(ufl.VectorElement(sub, dim=element.value_shape()[0])))
+
+
 def _rectangle(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...]):
     (x0, y0), (x1, y1) = cfg.corners
-    msh = dmesh.create_rectangle(
+    msh = equispaced(dmesh.create_rectangle(
         comm, [np.array([x0, y0]), np.array([x1, y1])], [cfg.nx, cfg.ny],
         cell_type=dmesh.CellType.triangle, diagonal=_DIAGONAL[cfg.diagonal],
-    )
+    ))
     tol = 1e-10 * max(x1 - x0, y1 - y0)
     ft, tags = _tag(msh, parts, lambda part: _side_marker(part.side, cfg.corners, part.interval, tol))
     return msh, ft, tags
@@ -128,7 +146,7 @@ def _tag(msh: dmesh.Mesh, parts: tuple[BoundaryConfig, ...], marker_of) -> tuple
 def _box(comm: MPI.Comm, cfg: MeshConfig, parts: tuple[BoundaryConfig, ...]):
     """The box [corners] cut into nx x ny x nz hexahedra of 6 tetrahedra each; faces tagged like a rectangle's sides."""
     p0, p1 = (np.array(c, dtype=float) for c in cfg.corners)
-    msh = dmesh.create_box(comm, [p0, p1], [cfg.nx, cfg.ny, cfg.nz], cell_type=dmesh.CellType.tetrahedron)
+    msh = equispaced(dmesh.create_box(comm, [p0, p1], [cfg.nx, cfg.ny, cfg.nz], cell_type=dmesh.CellType.tetrahedron))
     tol = 1e-10 * float(np.max(p1 - p0))
     ft, tags = _tag(msh, parts, lambda part: _face_marker(part.side, cfg.corners, part.patch, tol))
     return msh, ft, tags
