@@ -89,6 +89,43 @@ def _same_results(a: Path, b: Path) -> dict[str, float]:
     return diff
 
 
+def pieces(scene: str, overrides: list[str], repeats: int) -> dict[str, list[float]]:
+    """In this process, alternated: the FFCx cache lookups of a model's modules by FFCx's finder and by file name
+    (formcache._direct), and the order of a checkpoint's points by the structured argsort and by lexsort."""
+    sys.path.insert(0, str(ROOT))  # this checkout's solver
+    from mpi4py import MPI
+
+    from solver.config import load
+    from solver.io import checkpoint
+    from solver.run import formcache
+    from solver.run.model import build_model
+
+    formcache.install()
+    model = build_model(load(scene, overrides), MPI.COMM_WORLD)
+    modules = list(formcache._found)
+    points = [f.coords[: f.owned] for f in checkpoint._fields(model).values()]
+    out: dict[str, list[float]] = {"lookups_ffcx": [], "lookups_by_name": [], "order_argsort": [], "order_lexsort": []}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for name, objects, cache in modules:
+            formcache._disk_lookup(name, list(objects), cache, 10)
+        t1 = time.perf_counter()
+        for name, objects, cache in modules:
+            formcache._direct(name, list(objects), cache)
+        t2 = time.perf_counter()
+        for c in points:
+            np.argsort(checkpoint._keys(c))
+        t3 = time.perf_counter()
+        for c in points:
+            checkpoint._order(c)
+        t4 = time.perf_counter()
+        for key, value in zip(out, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            out[key].append(value)
+    out["modules"] = [len(modules)]
+    out["points"] = [sum(len(c) for c in points)]
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--before", default="HEAD~1", help="the commit to compare with (default HEAD~1)")
@@ -97,9 +134,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", dest="overrides", action="append", metavar="SECTION.KEY=VALUE",
                    help="scene overrides (default: mesh.nx=128, mesh.ny=128, time.k=0.005)")
     p.add_argument("--name", default="startup", help="result files NAME.json and NAME.md")
+    p.add_argument("--pieces", action="store_true", help=argparse.SUPPRESS)  # the child process of pieces()
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = p.parse_args(argv)
     args.overrides = args.overrides or ["mesh.nx=128", "mesh.ny=128", "time.k=0.005"]
+    if args.pieces:
+        print(json.dumps(pieces(args.scene, args.overrides, args.repeats)))
+        return 0
     before_rev = subprocess.run(["git", "rev-parse", "--short", args.before], cwd=ROOT, check=True,
                                 capture_output=True, text=True).stdout.strip()
     after_rev = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, check=True,
@@ -115,12 +156,15 @@ def main(argv: list[str] | None = None) -> int:
                 imports[name].append(_imports(tree))
                 print(name, i, {k: round(v, 3) for k, v in runs[name][-1].items()}, flush=True)
         differ = _same_results(tmp / "before0", tmp / "after0")
+    child = [sys.executable, str(Path(__file__).resolve()), "--pieces", "--repeats", str(3 * args.repeats),
+             "--scene", args.scene, *(a for o in args.overrides for a in ("--set", o))]
+    parts = json.loads(subprocess.run(child, cwd=ROOT, check=True, capture_output=True, text=True).stdout)
     med = {name: {key: statistics.median(r[key] for r in rs) for key in rs[0]} for name, rs in runs.items()}
     for name in med:
         med[name]["imports"] = statistics.median(imports[name])
     result = {"before": before_rev, "after": after_rev, "scene": args.scene, "overrides": args.overrides,
               "repeats": args.repeats,
-              "median": med, "runs": runs, "imports": imports, "differ": differ,
+              "median": med, "runs": runs, "imports": imports, "differ": differ, "pieces": parts,
               "ratio": {key: med["after"][key] / med["before"][key] for key in med["after"]},
               "pair_ratio": {key: statistics.median(a[key] / b[key] for a, b in zip(runs["after"], runs["before"]))
                              for key in runs["after"][0]}}
@@ -147,10 +191,19 @@ def _table(r: dict) -> str:
               for label, key in rows]
     lines += ["", f"Share of start-up and end in the whole run: before {b['startup_end'] / b['total']:.1%}, "
               f"after {a['startup_end'] / a['total']:.1%}.", "",
+              _pieces_line(r["pieces"]), "",
               "Same results (every timeseries.csv column but the times; every dataset of checkpoint.h5, bit for bit): "
               + ("yes" if not r["differ"] else "bit for bit except (max relative difference): "
                  + ", ".join(f"{k} {v:.1e}" for k, v in r["differ"].items())), ""]
     return "\n".join(lines)
+
+
+def _pieces_line(parts: dict) -> str:
+    m = {key: statistics.median(v) for key, v in parts.items()}
+    return (f"In one process, alternated ({len(parts['lookups_ffcx'])} times, medians): the {m['modules']:.0f} FFCx "
+            f"modules of the model looked up by FFCx's finder {1e3 * m['lookups_ffcx']:.1f} ms, by file name "
+            f"{1e3 * m['lookups_by_name']:.1f} ms; a checkpoint's {m['points']:,.0f} points ordered by the structured "
+            f"argsort {1e3 * m['order_argsort']:.1f} ms, by lexsort {1e3 * m['order_lexsort']:.1f} ms (per write).")
 
 
 if __name__ == "__main__":
