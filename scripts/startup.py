@@ -69,6 +69,48 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a - b))) / (scale or 1.0) if a.size else 0.0
 
 
+BUILD = ("import json, resource, sys, time; from mpi4py import MPI; from solver.config import load; "
+         "from solver.run.model import build_model; t = time.perf_counter(); "
+         "build_model(load(sys.argv[1], sys.argv[2:]), MPI.COMM_WORLD); "
+         "print(json.dumps({'build': time.perf_counter() - t, "
+         "'peak_mib': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))")
+
+
+def _build(tree: Path, scene: str, overrides: list[str]) -> dict[str, float]:
+    """build_model alone in a new process from ``tree``: its time and the process's peak resident memory."""
+    res = subprocess.run([sys.executable, "-c", BUILD, scene, *overrides], cwd=tree, check=True, capture_output=True,
+                         text=True)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def build_only(args: argparse.Namespace, before_rev: str, after_rev: str) -> int:
+    """``--build-only``: the model's set-up (build_model) before/after, alternated; NAME.json and NAME.md."""
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {"before": _export(args.before, Path(tmp)), "after": ROOT}
+        runs: dict[str, list[dict]] = {"before": [], "after": []}
+        for _ in range(args.repeats):
+            for name, tree in trees.items():
+                runs[name].append(_build(tree, args.scene, args.overrides))
+                print(name, runs[name][-1], flush=True)
+    med = {name: {key: statistics.median(r[key] for r in rs) for key in rs[0]} for name, rs in runs.items()}
+    sets = " ".join(f"--set {o}" for o in args.overrides)
+    text = "\n".join([
+        f"# The model's set-up (build_model) of {args.scene} {sets} (one rank)", "",
+        f"`python scripts/startup.py --build-only --before {before_rev} --scene {args.scene} {sets} --name {args.name}`:"
+        f" before = {before_rev}, after = {after_rev}; {args.repeats} of each, alternated, each a new process; medians.",
+        "", "| | before | after | after / before |", "|---|---|---|---|",
+        f"| build_model (s) | {med['before']['build']:.2f} | {med['after']['build']:.2f} | "
+        f"{med['after']['build'] / med['before']['build']:.3f} |",
+        f"| peak resident memory of the process (MiB) | {med['before']['peak_mib']:.0f} | {med['after']['peak_mib']:.0f} | "
+        f"{med['after']['peak_mib'] / med['before']['peak_mib']:.3f} |", ""])
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.name}.json").write_text(json.dumps({"before": before_rev, "after": after_rev, "runs": runs,
+                                                            "median": med}, indent=1) + "\n")
+    (args.out / f"{args.name}.md").write_text(text)
+    print(text)
+    return 0
+
+
 def _same_results(a: Path, b: Path) -> dict[str, float]:
     """What differs between two result directories, with its max relative difference: CSV columns (times excepted)
     and checkpoint datasets."""
@@ -135,6 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="scene overrides (default: mesh.nx=128, mesh.ny=128, time.k=0.005)")
     p.add_argument("--name", default="startup", help="result files NAME.json and NAME.md")
     p.add_argument("--pieces", action="store_true", help=argparse.SUPPRESS)  # the child process of pieces()
+    p.add_argument("--build-only", action="store_true", help="time only build_model (and its peak memory)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = p.parse_args(argv)
     args.overrides = args.overrides or ["mesh.nx=128", "mesh.ny=128", "time.k=0.005"]
@@ -145,6 +188,8 @@ def main(argv: list[str] | None = None) -> int:
                                 capture_output=True, text=True).stdout.strip()
     after_rev = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, check=True,
                                capture_output=True, text=True).stdout.strip()
+    if args.build_only:
+        return build_only(args, before_rev, after_rev)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         trees = {"before": _export(args.before, Path(tempfile.mkdtemp(dir=tmp))), "after": ROOT}
