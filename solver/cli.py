@@ -288,6 +288,7 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     from solver.io.results import run
     from solver.run.model import build_model
 
+    formcache.install()  # compiled forms opened by file name, not found by listing FFCx's cache (start-up)
     start = time.perf_counter()
     if cfg.accuracy.enabled:
         cfg, model, plan, sensors = _planned(args, comm, cfg, outdir)

@@ -26,10 +26,10 @@ class SolverConfig:
     again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
     up to newton.FALLBACK_IT_FACTOR * max_it iterations; false: such a level fails at ``max_it``.
 
-    ``linear = "auto"`` is resolved on the mesh (linear.choose_linear): in 2-D PETSc's sequential Cholesky on one
-    process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below linear.AUTO_ITERATIVE_DOFS_3D = 10,000
-    displacement dofs and the iterative solver from there (the crossover of a 50-step 3-D Example 1 run,
-    benchmarks/results/auto_3d/scaling.md)."""
+    ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's
+    sequential Cholesky on one process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below
+    linear.AUTO_ITERATIVE_DOFS_3D = 60,000 displacement dofs for a run of 10 steps or more, the iterative solver
+    for shorter runs from 10,000 dofs and for every run from 60,000 (benchmarks/results/auto_rule.md)."""
 
     rtol: float = 1e-10
     max_it: int = 25

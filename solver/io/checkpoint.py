@@ -42,6 +42,14 @@ def _keys(coords: np.ndarray) -> np.ndarray:
     return c.view([(f"x{i}", c.dtype) for i in range(c.shape[1])]).ravel()
 
 
+def _order(coords: np.ndarray) -> np.ndarray:
+    """The order of the points by their :func:`_keys` (x, then y, then z, rounded to 1e-10): ``np.lexsort`` on the
+    columns, which sorts distinct points as ``np.argsort(_keys(coords))`` does, 3-4 times faster (the structured
+    comparison took 0.65 s for 200,000 points; issue 30, the end of a run)."""
+    c = np.round(coords, 10)
+    return np.lexsort(c.T[::-1])
+
+
 @dataclass
 class _Field:
     coords: np.ndarray  # dof coordinates (owned first)
@@ -113,7 +121,7 @@ def write(directory: Path, model, step: int, t: float, part: int) -> None:
                 for name, parts in gathered.items():
                     coords = np.concatenate([p[0] for p in parts])
                     values = np.concatenate([p[1] for p in parts])
-                    order = np.argsort(_keys(coords))
+                    order = _order(coords)
                     h5.create_dataset(f"{name}/coords", data=coords[order])
                     h5.create_dataset(f"{name}/values", data=values[order])
             with open(tmp, "rb") as fh:

@@ -55,7 +55,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     u = fem.Function(V, name="displacement")
     k, steps = cfg.time.k, cfg.time.steps
     dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
-    linear = choose_linear(cfg.solver.linear, comm, geo.dim, dofs, cfg.solver.method)
+    linear = choose_linear(cfg.solver.linear, comm, geo.dim, dofs, cfg.solver.method, steps)
     settings = dataclasses.replace(cfg.solver, linear=linear)  # cfg itself keeps the scene's value (restart's hash)
     damage = None
     if cfg.damage.enabled:

@@ -17,31 +17,48 @@ from dolfinx import fem, la
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from solver.config.solver import NEWTON_METHODS
 from solver.errors import ConfigError
 
-# 3-D scenes: ``auto`` factors with MUMPS below this many displacement dofs and solves iteratively from it on.
-# Measured on 3-D Example 1, one rank (benchmarks/results/auto_3d/scaling.md): a 50-step run (the example's)
-# takes 1.2 s with MUMPS and 1.3 s iteratively at 6,591 dofs, 3.7 s and 2.6 s at 10,125, 57 s and 23 s at 59,049
-# Those runs were on netlib's reference BLAS. The re-measure on OpenBLAS (benchmarks/results/scaling.md, "Direct
-# against iterative", issue 30) found MUMPS faster for a 50-step run at 36,501 and 107,811 dofs on one rank. That
-# was on a 2-core machine loaded by other work, whose iterative steps were 9x their unloaded time, so the threshold
-# is kept until a quiet machine confirms it.
-AUTO_ITERATIVE_DOFS_3D = 10_000
+# 3-D scenes: what ``auto`` picks (choose_linear). Measured on 3-D Example 1 with OpenBLAS, one rank, every solver
+# alternated, wall and CPU time (scripts/auto_rule.py; benchmarks/results/auto_rule.md and auto_rule_107k/; issue 30):
+# at 10,125 dofs MUMPS is cheaper than the iterative path in both level 0 (its two factorizations, K and K + C) and
+# the steps; at 36,501 its level 0 is 1.2-1.7x dearer and its steps 2-2.5x cheaper, a break-even after 8-10 steps;
+# at 107,811 its level 0 is 6.8x (wall) / 2.2x (CPU) dearer and its steps 2.6x / 1.2x cheaper, a break-even after
+# 60 / 167 steps, past 3-D Example 1's 50. So MUMPS below AUTO_ITERATIVE_DOFS_3D dofs (60,000: between the two
+# measured sizes, near their geometric mean) for a run of AUTO_DIRECT_MIN_STEPS_3D steps or more, the iterative
+# path for shorter runs from 10,000 dofs (where level 0 decides) and for every run from AUTO_ITERATIVE_DOFS_3D on
+# (MUMPS's fill grows faster than the mesh: its level 0 grew 7.5x from 10,125 to 36,501 dofs, and its memory was
+# 2.2x the iterative path's at 107,811, benchmarks/results/scaling.md). The machine was loaded (load average 7 on
+# 2 cores): wall and CPU time are both given, and the rule holds for both. A run whose
+# active set moves pays a factorization (MUMPS) or a set-up (iterative) at each change: the steps then weigh less
+# and the rule counts only level 0's two. Before issue 30, measured on netlib's reference BLAS
+# (benchmarks/results/auto_3d/scaling.md), the iterative path was taken from 10,000 dofs for every run.
+AUTO_ITERATIVE_DOFS_3D = 60_000
+AUTO_SHORT_RUN_DOFS_3D = 10_000
+AUTO_DIRECT_MIN_STEPS_3D = 10
+NEWTON = NEWTON_METHODS  # the methods that can solve iteratively (the others re-solve one factor)
 
 
-def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton") -> str:
+def choose_linear(kind: str, comm: MPI.Comm, dim: int, dofs: int, method: str = "newton",
+                  steps: int | None = None) -> str:
     """The linear solver ``solver.linear = kind`` stands for on a mesh of dimension ``dim`` with ``dofs``
-    displacement dofs (global): ``kind`` itself unless it is ``auto``.
+    displacement dofs (global), for a run of ``steps`` steps (None: a long one): ``kind`` itself unless it is
+    ``auto``.
 
     ``auto`` in 2-D: the sequential Cholesky on one process, solved redundantly on up to 4 ranks, MUMPS beyond
-    (:func:`direct_options`). In 3-D a sparse factorization fills much more: MUMPS below
-    ``AUTO_ITERATIVE_DOFS_3D`` dofs, the iterative solver from there on (Newton only: the fixed-point
-    methods re-solve one factored matrix many times).
+    (:func:`direct_options`). In 3-D (Newton only: the fixed-point methods re-solve one factored matrix many times,
+    always MUMPS): MUMPS below ``AUTO_ITERATIVE_DOFS_3D`` dofs, except a run shorter than
+    ``AUTO_DIRECT_MIN_STEPS_3D`` steps from ``AUTO_SHORT_RUN_DOFS_3D`` dofs on, and the iterative solver from
+    ``AUTO_ITERATIVE_DOFS_3D`` on (the measurements above).
     """
     if kind != "auto":
         return kind
     if dim == 3:
-        return "iterative" if method in ("newton", "newton_energy", "newton_condensed") and dofs >= AUTO_ITERATIVE_DOFS_3D else "mumps"
+        if method not in NEWTON:
+            return "mumps"
+        short = steps is not None and steps < AUTO_DIRECT_MIN_STEPS_3D
+        return "iterative" if dofs >= AUTO_ITERATIVE_DOFS_3D or (short and dofs >= AUTO_SHORT_RUN_DOFS_3D) else "mumps"
     return _auto_direct(comm)
 
 

@@ -25,6 +25,18 @@ def test_keys_sort_points_by_coordinates():
     assert list(np.argsort(checkpoint._keys(pts))) == [2, 1, 0]
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_written_order_is_the_keys_order(dim):
+    """checkpoint._order (lexsort on the columns, issue 30) puts distinct points in the order np.argsort(_keys) did,
+    so a run writes the same file: grid points (ties in x, in y) in a shuffled order, some at -0.0."""
+    rng = np.random.default_rng(1)
+    pts = np.unique(rng.integers(-2, 4, size=(400, dim)) / 5.0, axis=0)
+    pts[pts == 0.0] = -0.0
+    pts = np.vstack([pts, np.full((1, dim), 0.1 + 3e-11)])  # rounds (1e-10) onto no other point
+    pts = pts[rng.permutation(len(pts))]
+    assert np.array_equal(checkpoint._order(pts), np.argsort(checkpoint._keys(pts)))
+
+
 def test_round_trip_restores_every_field(comm, shared_tmp):
     cfg = from_dict(SCENE)
     model = build_model(cfg, comm)

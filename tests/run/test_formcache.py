@@ -70,3 +70,21 @@ def test_the_measure_of_a_boundary_part_compiles_nothing(comm, monkeypatch):
     geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
     assert compiled == []
     assert abs(geo.measure("bottom") - 1.0) < 1e-14 and abs(geo.measure("left") - 1.0) < 1e-14
+
+
+def test_a_compiled_module_is_opened_by_name_without_listing_the_cache(comm, monkeypatch):
+    """Issue 30, start-up: a module FFCx compiled in an earlier process is loaded from its file, not found by FFCx's
+    lookup (which lists the whole cache directory each time); the model is the same."""
+    cfg = from_dict({"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.2, "k": 0.1}})
+    first = build_model(cfg, comm)  # compiles (or finds) every module once
+    rows_first = [Stepper(first).step(n) for n in range(3)]
+    asked = []
+    disk = formcache._disk_lookup
+    monkeypatch.setattr(formcache, "_found", {})  # as in a new process: nothing in memory
+    monkeypatch.setattr(formcache, "_disk_lookup", lambda *a: asked.append(a[0]) or disk(*a))
+    second = build_model(cfg, comm)
+    rows_second = [Stepper(second).step(n) for n in range(3)]
+    assert asked == []
+    assert formcache.kept() > 0
+    assert np.array_equal(first.u.x.array, second.u.x.array)
+    assert [r["strain_norm"] for r in rows_first] == [r["strain_norm"] for r in rows_second]

@@ -158,19 +158,48 @@ class _Size:
         self.size = size
 
 
-def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_in_3d():
-    from solver.solvers.linear import AUTO_ITERATIVE_DOFS_3D, choose_linear
+def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_and_steps_in_3d():
+    """Issue 30 (scripts/auto_rule.py): in 3-D MUMPS for a run of 10 steps or more below 60,000 dofs (it was the
+    iterative path from 10,000 dofs); a shorter run keeps the iterative path from 10,000; from 60,000 always."""
+    from solver.solvers.linear import (
+        AUTO_DIRECT_MIN_STEPS_3D,
+        AUTO_ITERATIVE_DOFS_3D,
+        AUTO_SHORT_RUN_DOFS_3D,
+        choose_linear,
+    )
 
     big = 10 * AUTO_ITERATIVE_DOFS_3D
     for size, expected in ((1, "petsc"), (2, "redundant"), (4, "redundant"), (5, "mumps")):
-        assert choose_linear("auto", _Size(size), 2, big) == expected  # 2-D: as before, whatever the size
+        for steps in (None, 1, 1000):
+            assert choose_linear("auto", _Size(size), 2, big, steps=steps) == expected  # 2-D: as before
         assert direct_options(_Size(size), "auto") == direct_options(_Size(size), expected)
+    long, short = AUTO_DIRECT_MIN_STEPS_3D, AUTO_DIRECT_MIN_STEPS_3D - 1
     for size in (1, 2, 8):
-        assert choose_linear("auto", _Size(size), 3, AUTO_ITERATIVE_DOFS_3D - 1) == "mumps"
-        assert choose_linear("auto", _Size(size), 3, AUTO_ITERATIVE_DOFS_3D) == "iterative"
-        assert choose_linear("auto", _Size(size), 3, big, method="fixed_point") == "mumps"  # re-solves one factor
+        def pick(dofs, steps, method="newton", size=size):
+            return choose_linear("auto", _Size(size), 3, dofs, method=method, steps=steps)
+
+        assert pick(AUTO_SHORT_RUN_DOFS_3D - 1, short) == pick(AUTO_SHORT_RUN_DOFS_3D - 1, long) == "mumps"
+        assert pick(10_125, long) == pick(36_501, long) == pick(36_501, None) == "mumps"  # measured: MUMPS
+        assert pick(107_811, long) == pick(107_811, None) == "iterative"  # measured: iterative for 50 steps
+        assert pick(AUTO_SHORT_RUN_DOFS_3D, short) == pick(36_501, short) == "iterative"  # level 0 decides
+        assert pick(AUTO_ITERATIVE_DOFS_3D, long) == pick(AUTO_ITERATIVE_DOFS_3D, None) == "iterative"
+        assert pick(big, long, method="newton_energy") == "iterative"
+        assert pick(big, short, method="fixed_point") == "mumps"  # re-solves one factor
     for kind in ("petsc", "mumps", "redundant", "iterative"):  # a named solver is never replaced
         assert choose_linear(kind, _Size(1), 3, 10) == choose_linear(kind, _Size(1), 2, big) == kind
+
+
+def test_the_model_passes_its_steps_to_the_rule(comm):
+    """A 3-D scene of 10,125 dofs: the iterative path for 5 steps, MUMPS for 50 (before issue 30: iterative)."""
+    from conftest import ROOT
+
+    from solver.config import load
+    from solver.run.model import build_model
+
+    base = ["mesh.nx=14", "mesh.ny=14", "mesh.nz=14"]
+    short = build_model(load(ROOT / "configs/example1_3d.toml", [*base, "time.T=0.1"]), comm)
+    long = build_model(load(ROOT / "configs/example1_3d.toml", [*base, "time.T=1.0"]), comm)
+    assert (short.linear, long.linear) == ("iterative", "mumps")
 
 
 def _small_3d(linear: str, extra: tuple[str, ...] = ()):
