@@ -150,3 +150,13 @@ def test_anchor_table_reads_every_case_as_a_ratio_to_the_plain_solve():
     assert f"| iterative | 1.20 | - | - | 1.50 | 2.00 | {per_dof} |" in text
     assert "| mumps | 5.00 | 3.00 | 1.50 | - | 3.00 |" in text  # level 0 holds two factorizations
     assert "| 20 | 27,783 | 2 | gamg | failed: x |" in text
+
+
+def test_the_docs_page_carries_the_generated_blocks_markers():
+    """`bench --scaling` rewrites the block between the markers; a marker that drifts from the code's silently stops
+    the rewrite (it had: the page said '.venv/bin/python -m studies ...')."""
+    from studies import REPO
+    from studies.scaling import README_BEGIN, README_END
+
+    text = (REPO / "docs" / "benchmarks" / "scaling.md").read_text()
+    assert README_BEGIN in text and README_END in text
