@@ -61,6 +61,10 @@ def scenes(draw) -> dict:
     """A scene document: the defaults, some sections left out, some values replaced, dropped or added."""
     keep = draw(st.lists(st.sampled_from(SECTIONS), min_size=1, max_size=len(SECTIONS), unique=True))
     doc = {s: _copy(DEFAULT[s]) for s in keep}
+    if draw(st.booleans()):  # small and short (before the mutations): what check and run try
+        if isinstance(doc.get("mesh"), dict) and doc["mesh"].get("kind") == "rectangle":
+            doc["mesh"]["nx"], doc["mesh"]["ny"] = 4, 4
+        doc.setdefault("time", _copy(DEFAULT["time"]))["k"] = draw(st.sampled_from([0.25, 0.5, 1.0]))
     for _ in range(draw(st.integers(0, 4))):
         path = draw(st.sampled_from(PATHS))
         action = draw(st.sampled_from(["replace", "drop", "unknown"]))
@@ -75,10 +79,6 @@ def scenes(draw) -> dict:
             node.pop(path[-1], None)
         else:
             node[draw(TEXT) or "x"] = draw(VALUES)
-    if draw(st.booleans()):  # the small, fast meshes that check and run try
-        mesh = doc.get("mesh")
-        if isinstance(mesh, dict) and mesh.get("kind") == "rectangle":
-            mesh["nx"], mesh["ny"] = 4, 4
     return doc
 
 
@@ -148,7 +148,8 @@ def check_one_line(code: int, err: str, what: str) -> None:
 
 
 def scene_property(doc: dict, overrides: list[str], tmp: Path, run: bool = False) -> str:
-    """The property for one scene and its overrides: returns 'unwritable', 'refused' or 'ok'; raises Defect."""
+    """The property for one scene and its overrides: returns 'unwritable', 'refused', 'ok' (valid; with ``run``
+    and at most 20 steps: 'ran', or 'run_failed' for a solve that failed in one line); raises Defect."""
     from solver.config import load
     from solver.errors import ConfigError
 
@@ -175,8 +176,12 @@ def scene_property(doc: dict, overrides: list[str], tmp: Path, run: bool = False
         out = tmp / "out"
         code, _, err = call_cli(["run", str(scene), *argv[2:], "--output", str(out), "--no-progress"])
         if code == 1 and err.startswith("failed:") and err.count("\n") == 1:
-            return "ok"  # a scene that is valid but whose solve fails: exit 1, one line, results kept
+            return "run_failed"  # a scene that is valid but whose solve fails: exit 1, one line, results kept
         check_one_line(code, err, what + " (run)")
         if code == 2 and out.exists():
             raise Defect(f"{what} (run): refused but wrote {sorted(p.name for p in out.iterdir())}")
+        if code == 0:
+            if not (out / "timeseries.csv").is_file():
+                raise Defect(f"{what} (run): exit 0 but no timeseries.csv in {out}")
+            return "ran"
     return "ok" if code == 0 else "refused"
