@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
             outcomes[f"{kind}:defect"] += 1
             first = str(exc).splitlines()[0] if str(exc) else repr(exc)
             key = first.split(": ", 2)[-1][:160]
-            defects.setdefault(key, first[:2000])
+            defects.setdefault(key, " | ".join(str(exc).splitlines())[:3000])  # what the user saw, on one line
 
     @seed(args.seed)
     @conf
