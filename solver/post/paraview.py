@@ -120,9 +120,10 @@ def check_results(argv: list[str]) -> None:
         return
     finally:
         sys.path[:] = path  # the script drops this folder from the path
-    given = given / "solution.xdmf" if given.is_dir() else given
-    if given.is_file():
-        read_series(given, values=False)
+    series = given / "solution.xdmf" if given.is_dir() else given
+    if not series.is_file():  # what the script says, without starting ParaView to say it
+        raise ResultsError(given, "no solution.xdmf (is it a results directory?)")
+    read_series(series, values=False)
 
 
 def main(argv: list[str] | None = None) -> int:
