@@ -159,3 +159,20 @@ def test_paraview_draws_a_directory_whose_csv_is_damaged(results_base, paraview,
     damages = [("csv", "timeseries.csv", 0, 6, "drop_column")]
     assert results_property(results_base, damages, tmp_path, paraview_command) == "ok"
     assert (tmp_path / "r" / "paraview_von_mises_elastic.png").is_file()
+
+
+def test_plot_draws_fields_holding_nan_quietly(results_base, plot_worker, tmp_path):
+    """NaN in a level's displacement and von Mises (a diverged or damaged write): the pictures are drawn, the warp
+    and the colour range from the finite values, and nothing on stderr (no numpy warning)."""
+    from fuzzing_results import plot_command, results_property
+
+    damages = [("h5", "fields/levels_000000.h5", 1, "nan"), ("h5", "fields/levels_000000.h5", 2, "nan")]  # t = 0
+    seen = {}
+
+    def command(directory):
+        seen["result"] = plot_command(plot_worker)(directory)
+        return seen["result"]
+
+    assert results_property(results_base, damages, tmp_path, command) == "ok"
+    code, out, err = seen["result"]
+    assert err == "" and "von_mises_final.png" in out and "damage_final.png" in out

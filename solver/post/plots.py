@@ -40,7 +40,8 @@ def _grid(res: dict, t: float, warp: float):
 def auto_warp(res: dict) -> float:
     """Largest displacement drawn as 10 % of the body's size (rounded to 1, 2 or 5 x 10^m)."""
     size = np.ptp(res["geometry"], axis=0).max()
-    umax = max((_finite_max(np.abs(v)) for v in res["fields"].get("displacement", {}).values()), default=0.0)
+    tops = [_finite_max(np.abs(v)) for v in res["fields"].get("displacement", {}).values()]
+    umax = max((m for m in tops if np.isfinite(m)), default=0.0)
     if not umax > 0:  # nothing moves (or no displacement was written, or none of it is finite)
         return 1.0
     w = 0.1 * size / umax
@@ -187,7 +188,8 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
         if not res["fields"].get(field):
             continue
         vm = res["fields"][field]
-        clim = (0.0, max(_finite_max(v) for v in vm.values()))  # one colour scale for both times
+        tops = [m for m in map(_finite_max, vm.values()) if np.isfinite(m)]
+        clim = (0.0, max(tops, default=float("nan")))  # one colour scale for both times (nan: from the values)
         written = sorted(vm)  # the levels that hold the field (a restart may change output.fields)
         picks = [("initial", written[0]), ("final", written[-1])]
         for near in nearest:
