@@ -14,6 +14,9 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import tomlkit
@@ -116,18 +119,41 @@ def small(cfg) -> bool:
 
 
 def call_cli(argv: list[str]) -> tuple[int, str, str]:
-    """``solver ARGV`` in this process: (exit code, stdout, stderr). argparse's exits count as exit codes."""
+    """``solver ARGV`` in this process: (exit code, stdout, stderr). argparse's exits count as exit codes. What
+    child processes (ParaView) and native code write on file descriptors 1 and 2 counts too: the user sees it."""
     from solver.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    with _native_output() as native, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = main(argv)
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 2
         except Exception as exc:  # what a user would see as a traceback
             raise Defect(f"solver {argv!r}: traceback: {type(exc).__name__}: {exc}"[:2000]) from exc
-    return code, out.getvalue(), err.getvalue()
+    return code, out.getvalue() + native["out"], err.getvalue() + native["err"]
+
+
+@contextlib.contextmanager
+def _native_output():
+    """File descriptors 1 and 2 sent to temporary files for the block; their text in the dict yielded, after it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    files = [tempfile.TemporaryFile(), tempfile.TemporaryFile()]
+    got: dict[str, str] = {}
+    try:
+        os.dup2(files[0].fileno(), 1)
+        os.dup2(files[1].fileno(), 2)
+        yield got
+    finally:
+        for fd, old in zip((1, 2), saved):
+            os.dup2(old, fd)
+            os.close(old)
+        for key, f in zip(("out", "err"), files):
+            f.seek(0)
+            got[key] = f.read().decode(errors="replace")
+            f.close()
 
 
 class Defect(AssertionError):

@@ -10,8 +10,8 @@ that names a file of the directory; never a traceback, never another exit code, 
 or changed (on success only new PNGs).
 
 ``solver plot`` cannot run in a process that has loaded dolfinx (VTK and dolfinx's C++ do not mix: a segfault
-in the render), so plots run in a worker process (:class:`PlotWorker`) that never imports dolfinx; its stderr at
-the file-descriptor level (VTK's own messages) counts as what the user sees.
+in the render), so plots run in a worker process (:class:`PlotWorker`) that never imports dolfinx; what is written
+on file descriptor 2 (VTK's own messages) counts as what the user sees (fuzzing.call_cli).
 """
 
 from __future__ import annotations
@@ -207,26 +207,16 @@ def results_property(base: Path, damages: list[tuple], tmp: Path, command) -> st
 
 
 WORKER = r"""
-import json, os, sys, tempfile
+import json, os, sys
 sys.path[:0] = [sys.argv[1], os.path.join(sys.argv[1], "tests")]
 from fuzzing import Defect, call_cli
-out = os.fdopen(os.dup(1), "w")
-os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # native code's stdout must not mix with the replies
+out = os.fdopen(os.dup(1), "w")  # the replies (call_cli catches what is written on descriptors 1 and 2)
 for line in sys.stdin:
-    fd2 = os.dup(2)
-    with tempfile.TemporaryFile() as capture:
-        os.dup2(capture.fileno(), 2)
-        try:
-            code, o, e = call_cli(json.loads(line))
-            reply = {"code": code, "out": o, "err": e}
-        except Defect as exc:
-            reply = {"defect": str(exc)}
-        finally:
-            sys.stderr.flush()
-            os.dup2(fd2, 2)
-            os.close(fd2)
-        capture.seek(0)
-        reply["native"] = capture.read().decode(errors="replace")
+    try:
+        code, o, e = call_cli(json.loads(line))
+        reply = {"code": code, "out": o, "err": e}
+    except Defect as exc:
+        reply = {"defect": str(exc)}
     out.write(json.dumps(reply) + "\n")
     out.flush()
 """
@@ -253,7 +243,7 @@ class PlotWorker:
         reply = json.loads(line)
         if "defect" in reply:
             raise Defect(reply["defect"])
-        return reply["code"], reply["out"], reply["err"] + reply["native"]
+        return reply["code"], reply["out"], reply["err"]
 
     def close(self) -> None:
         if self.proc is not None:

@@ -99,14 +99,12 @@ def virtual_display(xvfb: str) -> Iterator[str]:
                 proc.wait()
 
 
-def check_results(argv: list[str]) -> None:
-    """Refuse a damaged results directory before ParaView opens it (:class:`ResultsError`: the file and what is
-    wrong): VTK's readers print pages of errors, or crash, on a truncated ``.h5`` or an XDMF naming a missing file.
-    The XML and every dataset's presence, type and shape are checked with h5py; the field values are not read.
-    Command lines the script itself refuses (``--help``, a bad option, no solution.xdmf) are left to it."""
-    import contextlib
-    import io
-
+def check_results(argv: list[str]) -> int | None:
+    """The script's command line parsed here, and the directory checked, before ParaView starts: an exit code for
+    a command line argparse ends (``--help``: 0; a bad option: 2, its usage and error printed), else None. A
+    damaged results directory is a :class:`ResultsError` (the file and what is wrong): VTK's readers print pages of
+    errors, or abort, on a truncated ``.h5`` or an XDMF naming a missing file. The XML and every dataset's presence,
+    type and shape are checked with h5py; the field values are not read."""
     from solver.io.xdmf import read_series
 
     spec = importlib.util.spec_from_file_location("paraview_script", SCRIPT)
@@ -114,16 +112,16 @@ def check_results(argv: list[str]) -> None:
     path = list(sys.path)
     try:
         spec.loader.exec_module(script)
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            given = Path(script.parse_args(argv).results)
-    except SystemExit:
-        return
+        given = Path(script.parse_args(argv).results)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 2
     finally:
         sys.path[:] = path  # the script drops this folder from the path
     series = given / "solution.xdmf" if given.is_dir() else given
     if not series.is_file():  # what the script says, without starting ParaView to say it
         raise ResultsError(given, "no solution.xdmf (is it a results directory?)")
     read_series(series, values=False)
+    return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,10 +132,12 @@ def main(argv: list[str] | None = None) -> int:
         print(NOT_INSTALLED, file=sys.stderr)
         return 2
     try:
-        check_results(argv)
+        code = check_results(argv)
     except ResultsError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if code is not None:
+        return code
     cmd, env = command(argv, exe), environment()
     sys.stdout.flush()
     xvfb = shutil.which("Xvfb")
