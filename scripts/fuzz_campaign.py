@@ -42,6 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     chosen = set(args.properties.split(","))
     outcomes: Counter = Counter()
     defects: dict[str, str] = {}
+    harness: dict[str, str] = {}
     conf = settings(max_examples=args.examples, deadline=None, database=None, suppress_health_check=list(HealthCheck))
 
     def record(kind: str, fn) -> None:
@@ -52,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
             first = str(exc).splitlines()[0] if str(exc) else repr(exc)
             key = first.split(": ", 2)[-1][:160]
             defects.setdefault(key, " | ".join(str(exc).splitlines())[:3000])  # what the user saw, on one line
+        except Exception as exc:  # noqa: BLE001  (a bug of the fuzzer itself: counted apart, the campaign goes on)
+            outcomes[f"{kind}:harness_error"] += 1
+            harness.setdefault(f"{type(exc).__name__}: {exc}"[:300], kind)
 
     @seed(args.seed)
     @conf
@@ -93,13 +97,14 @@ def main(argv: list[str] | None = None) -> int:
                "properties": sorted(chosen),
                "inputs_tried": sum(outcomes.values()), "outcomes": dict(sorted(outcomes.items())),
                "defects": len(defects), "defect_messages": list(defects.values()),
+               "harness_errors": [f"{kind}: {msg}" for msg, kind in harness.items()],
                "seconds": round(time.perf_counter() - start, 1)}
     text = json.dumps(figures, indent=1, ensure_ascii=False)
     print(text)
     if args.output:
         args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text + "\n")
-    return 1 if defects else 0
+    return 1 if defects or harness else 0
 
 
 def results_campaign(name: str, base: Path, args, record) -> None:

@@ -131,22 +131,25 @@ def _damage_h5(path: Path, index: int, how: str) -> None:
         name = names[index % len(names)]
         data = f[name][...]
         del f[name]
+        rows = data.shape[0] if data.ndim else 1  # an earlier damage may have left a scalar or strings
         if how == "fewer_rows":
-            f[name] = data[:-1]
+            f[name] = data[:-1] if data.ndim else np.zeros(0)
         elif how == "more_columns":
-            f[name] = np.hstack([data.reshape(len(data), -1), np.zeros((len(data), 1))])
+            f[name] = np.zeros((rows, data.reshape(rows, -1).shape[1] + 1))
         elif how == "scalar":
             f[name] = 1.0
         elif how == "strings":
-            f[name] = np.array([b"x"] * max(len(data), 1))
+            f[name] = np.array([b"x"] * max(rows, 1))
         elif how == "nan":
             f[name] = np.full(data.shape, np.nan)
         elif how == "integers":
-            f[name] = data.astype(np.int64)
+            f[name] = data.astype(np.int64) if data.dtype.kind in "iuf" else np.zeros(data.shape, np.int64)
 
 
 def _damage_csv(path: Path, row: int, column: int, how: str) -> None:
-    lines = path.read_text().splitlines()
+    lines = path.read_text(errors="replace").splitlines()
+    if not lines:  # emptied by an earlier damage
+        return
     header = lines[0].split(",")
     body = lines[1:]
     c = column % len(header)
