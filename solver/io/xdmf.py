@@ -701,12 +701,19 @@ def read_series(path: str | Path, values: bool = True) -> dict:
                 out["points"] = items.load(g.find("Geometry/DataItem"), "geometry", numeric="f")
                 out["cells"] = items.load(g.find("Topology/DataItem"), "topology", numeric="iu")
                 _check_mesh(items.path, out["points"], out["cells"])
+            else:  # every level names its mesh again: ParaView reads each (and aborts on a missing one)
+                for tag, key, numeric in (("Geometry", "points", "f"), ("Topology", "cells", "iu")):
+                    shape = items.load(g.find(f"{tag}/DataItem"), f"{tag.lower()} at level {i}", numeric=numeric,
+                                       read=False).shape
+                    if shape != out[key].shape:
+                        raise ResultsError(path, f"{tag.lower()} at level {i}: shape {shape}, level 0's is "
+                                                 f"{out[key].shape}")
             out["times"].append(items.time(g, i))
             for att in g.findall("Attribute"):
                 name = att.get("Name")
                 if not name:
                     raise ResultsError(path, f"level {i}: an Attribute without a Name")
-                data = items.load(att.find("DataItem"), f"field {name}", read=values)
+                data = items.load(att.find("DataItem"), f"field {name} at level {i}", read=values)
                 if data.shape[:1] not in ((len(out["points"]),), (len(out["cells"]),)):
                     raise ResultsError(path, f"field {name} at level {i}: {data.shape[0] if data.shape else 0} rows, "
                                              f"neither the {len(out['points'])} nodes nor the {len(out['cells'])} cells")
@@ -779,8 +786,8 @@ class _Items:
         return self.files[name]
 
     def load(self, item, what: str, numeric: str = "iuf", read: bool = True) -> np.ndarray:
-        """The array a DataItem names (``FILE.h5:/DATASET``), of the shape the XML says; ``read=False``: an empty
-        array of that shape's rows (the dataset's presence, shape and type checked, its values not read)."""
+        """The array a DataItem names (``FILE.h5:/DATASET``), of the shape the XML says; ``read=False``: zeros of
+        that shape, taking no memory (the dataset's presence, shape and type checked, its values not read)."""
         import h5py
 
         text = "" if item is None or item.text is None else item.text.strip()
@@ -804,7 +811,7 @@ class _Items:
                                        f"{'numbers' if numeric == 'iuf' else 'integers' if 'i' in numeric else 'floats'}"
                                        f" of shape {dims}")
         if not read:
-            return np.empty((dims[0] if dims else 0, 0))
+            return np.broadcast_to(np.zeros((), data.dtype), dims)
         try:
             return data[...]
         except (OSError, ValueError) as exc:  # a damaged chunk
