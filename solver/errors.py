@@ -4,7 +4,8 @@ Callers decide by type and fields, never by the message text:
 
 - :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
   scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
-  line and the results directory, :class:`ToleranceError` for a tolerance out of reach
+  line and the results directory (:class:`ResultsError` for a damaged one: ``path``, ``reason``),
+  :class:`ToleranceError` for a tolerance out of reach
   (``tolerance``, ``estimate``, ``dofs``, ``limit``, ``predicted``), :class:`RigidMotionError` for supports that
   leave a rigid motion free (``motions``).
 - :class:`SolveFailure` (exit code 1): a run stopped. It knows the ``step`` and time ``t``
@@ -58,6 +59,15 @@ class ConfigError(InputError):
 
 class UsageError(InputError):
     """A mistake on the command line or with the results directory (exit code 2)."""
+
+
+class ResultsError(UsageError):
+    """A results directory that cannot be read: the file ``path`` and what is wrong with it (``reason``), e.g. a
+    truncated ``.h5``, an XDMF naming a missing file or dataset, a CSV without a column (exit code 2)."""
+
+    def __init__(self, path: Any, reason: str) -> None:
+        self.path, self.reason = str(path), " ".join(str(reason).split())  # one line, whatever a library said
+        super().__init__(f"{self.path}: {self.reason}")
 
 
 def show(value: Any) -> str:

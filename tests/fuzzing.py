@@ -14,6 +14,9 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import tomlkit
@@ -61,6 +64,10 @@ def scenes(draw) -> dict:
     """A scene document: the defaults, some sections left out, some values replaced, dropped or added."""
     keep = draw(st.lists(st.sampled_from(SECTIONS), min_size=1, max_size=len(SECTIONS), unique=True))
     doc = {s: _copy(DEFAULT[s]) for s in keep}
+    if draw(st.booleans()):  # small and short (before the mutations): what check and run try
+        if isinstance(doc.get("mesh"), dict) and doc["mesh"].get("kind") == "rectangle":
+            doc["mesh"]["nx"], doc["mesh"]["ny"] = 4, 4
+        doc.setdefault("time", _copy(DEFAULT["time"]))["k"] = draw(st.sampled_from([0.25, 0.5, 1.0]))
     for _ in range(draw(st.integers(0, 4))):
         path = draw(st.sampled_from(PATHS))
         action = draw(st.sampled_from(["replace", "drop", "unknown"]))
@@ -75,10 +82,6 @@ def scenes(draw) -> dict:
             node.pop(path[-1], None)
         else:
             node[draw(TEXT) or "x"] = draw(VALUES)
-    if draw(st.booleans()):  # the small, fast meshes that check and run try
-        mesh = doc.get("mesh")
-        if isinstance(mesh, dict) and mesh.get("kind") == "rectangle":
-            mesh["nx"], mesh["ny"] = 4, 4
     return doc
 
 
@@ -116,18 +119,41 @@ def small(cfg) -> bool:
 
 
 def call_cli(argv: list[str]) -> tuple[int, str, str]:
-    """``solver ARGV`` in this process: (exit code, stdout, stderr). argparse's exits count as exit codes."""
+    """``solver ARGV`` in this process: (exit code, stdout, stderr). argparse's exits count as exit codes. What
+    child processes (ParaView) and native code write on file descriptors 1 and 2 counts too: the user sees it."""
     from solver.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    with _native_output() as native, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = main(argv)
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 2
         except Exception as exc:  # what a user would see as a traceback
             raise Defect(f"solver {argv!r}: traceback: {type(exc).__name__}: {exc}"[:2000]) from exc
-    return code, out.getvalue(), err.getvalue()
+    return code, out.getvalue() + native["out"], err.getvalue() + native["err"]
+
+
+@contextlib.contextmanager
+def _native_output():
+    """File descriptors 1 and 2 sent to temporary files for the block; their text in the dict yielded, after it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    files = [tempfile.TemporaryFile(), tempfile.TemporaryFile()]
+    got: dict[str, str] = {}
+    try:
+        os.dup2(files[0].fileno(), 1)
+        os.dup2(files[1].fileno(), 2)
+        yield got
+    finally:
+        for fd, old in zip((1, 2), saved):
+            os.dup2(old, fd)
+            os.close(old)
+        for key, f in zip(("out", "err"), files):
+            f.seek(0)
+            got[key] = f.read().decode(errors="replace")
+            f.close()
 
 
 class Defect(AssertionError):
@@ -148,7 +174,8 @@ def check_one_line(code: int, err: str, what: str) -> None:
 
 
 def scene_property(doc: dict, overrides: list[str], tmp: Path, run: bool = False) -> str:
-    """The property for one scene and its overrides: returns 'unwritable', 'refused' or 'ok'; raises Defect."""
+    """The property for one scene and its overrides: returns 'unwritable', 'refused', 'ok' (valid; with ``run``
+    and at most 20 steps: 'ran', or 'run_failed' for a solve that failed in one line); raises Defect."""
     from solver.config import load
     from solver.errors import ConfigError
 
@@ -175,8 +202,12 @@ def scene_property(doc: dict, overrides: list[str], tmp: Path, run: bool = False
         out = tmp / "out"
         code, _, err = call_cli(["run", str(scene), *argv[2:], "--output", str(out), "--no-progress"])
         if code == 1 and err.startswith("failed:") and err.count("\n") == 1:
-            return "ok"  # a scene that is valid but whose solve fails: exit 1, one line, results kept
+            return "run_failed"  # a scene that is valid but whose solve fails: exit 1, one line, results kept
         check_one_line(code, err, what + " (run)")
         if code == 2 and out.exists():
             raise Defect(f"{what} (run): refused but wrote {sorted(p.name for p in out.iterdir())}")
+        if code == 0:
+            if not (out / "timeseries.csv").is_file():
+                raise Defect(f"{what} (run): exit 0 but no timeseries.csv in {out}")
+            return "ran"
     return "ok" if code == 0 else "refused"

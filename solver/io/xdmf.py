@@ -74,6 +74,8 @@ from pathlib import Path
 
 import numpy as np
 
+from solver.errors import ResultsError
+
 PRECISIONS = {"double": np.dtype("<f8"), "single": np.dtype("<f4")}
 KINDS = {"Scalar": 1, "Vector": 3, "Tensor6": 6}  # components in the file
 CENTERS = ("Node", "Cell")
@@ -681,42 +683,136 @@ def describe_oserror(exc: OSError) -> str:
     return f"{reason} ({name})" if name else reason
 
 
-def read_series(path: str | Path) -> dict:
+def read_series(path: str | Path, values: bool = True) -> dict:
     """Read a series back with h5py (independently of the writer): points, cells, times, {field: [values per time]}
-    (None at a time that lacks the field: a restart may change ``output.fields``)."""
-    import h5py
+    (None at a time that lacks the field: a restart may change ``output.fields``).
 
+    Everything the XML names is checked, so that a damaged results directory is one :class:`ResultsError` naming
+    the file and what is wrong (a truncated or missing ``.h5``, a missing dataset, a shape other than the XML's,
+    malformed XML, cells naming nodes that do not exist) and never a library's traceback. ``values=False`` checks
+    the field datasets' presence and shapes without reading them (their entries are then None): what a renderer
+    that reads the files itself (ParaView) needs to know first."""
     path = Path(path)
-    root = ET.parse(path).getroot()
-    grids = root.find("Domain/Grid").findall("Grid")
-    files: dict[str, h5py.File] = {}
-
-    def load(item: ET.Element) -> np.ndarray:
-        name, dataset = item.text.strip().split(":", 1)
-        if name not in files:
-            files[name] = h5py.File(path.parent / name, "r")
-        data = files[name][dataset][...]
-        dims = tuple(int(d) for d in item.get("Dimensions").split())
-        if data.shape != dims:
-            raise ValueError(f"{name}:{dataset}: shape {data.shape}, the XML says {dims}")
-        return data
-
-    out: dict = {"times": [], "fields": {}}
-    try:
-        for g in grids:
-            if "points" not in out:
-                out["points"] = load(g.find("Geometry/DataItem"))
-                out["cells"] = load(g.find("Topology/DataItem"))
-            i = len(out["times"])
-            out["times"].append(float(g.find("Time").get("Value")))
+    with _Items(path, values) as items:
+        grids = items.grids()
+        out: dict = {"times": [], "fields": {}}
+        for i, g in enumerate(grids):
+            if i == 0:
+                out["points"] = items.load(g.find("Geometry/DataItem"), "geometry", numeric="f")
+                out["cells"] = items.load(g.find("Topology/DataItem"), "topology", numeric="iu")
+                _check_mesh(items.path, out["points"], out["cells"])
+            else:  # every level names its mesh again: ParaView reads each (and aborts on a missing one)
+                for tag, key, numeric in (("Geometry", "points", "f"), ("Topology", "cells", "iu")):
+                    shape = items.load(g.find(f"{tag}/DataItem"), f"{tag.lower()} at level {i}", numeric=numeric,
+                                       read=False).shape
+                    if shape != out[key].shape:
+                        raise ResultsError(path, f"{tag.lower()} at level {i}: shape {shape}, level 0's is "
+                                                 f"{out[key].shape}")
+            out["times"].append(items.time(g, i))
             for att in g.findall("Attribute"):
-                values = out["fields"].setdefault(att.get("Name"), [])
-                values += [None] * (i - len(values)) + [load(att.find("DataItem"))]
-        for values in out["fields"].values():
-            values += [None] * (len(out["times"]) - len(values))
-    finally:
-        for f in files.values():
-            f.close()
+                name = att.get("Name")
+                if not name:
+                    raise ResultsError(path, f"level {i}: an Attribute without a Name")
+                data = items.load(att.find("DataItem"), f"field {name} at level {i}", read=values)
+                if data.shape[:1] not in ((len(out["points"]),), (len(out["cells"]),)):
+                    raise ResultsError(path, f"field {name} at level {i}: {data.shape[0] if data.shape else 0} rows, "
+                                             f"neither the {len(out['points'])} nodes nor the {len(out['cells'])} cells")
+                field_values = out["fields"].setdefault(name, [])
+                field_values += [None] * (i - len(field_values)) + [data if values else None]
+        for field_values in out["fields"].values():
+            field_values += [None] * (len(out["times"]) - len(field_values))
     return out
 
 
+def _check_mesh(path: Path, points: np.ndarray, cells: np.ndarray) -> None:
+    """Nodes as rows of 2 or 3 finite coordinates; cells as triangles or tetrahedra naming existing nodes."""
+    if points.ndim != 2 or points.shape[1] not in (2, 3) or not np.isfinite(points).all():
+        raise ResultsError(path, f"geometry: {points.shape} coordinates, not finite rows of 2 or 3")
+    if cells.ndim != 2 or cells.shape[1] not in (3, 4) or len(cells) == 0:
+        raise ResultsError(path, f"topology: shape {cells.shape}, not rows of 3 (triangles) or 4 (tetrahedra) nodes")
+    if cells.min() < 0 or cells.max() >= len(points):
+        raise ResultsError(path, f"topology: node numbers {cells.min()}..{cells.max()} outside the {len(points)} nodes")
+
+
+class _Items:
+    """The XML of a series and the HDF5 files its DataItems name, opened once each (closed on leaving)."""
+
+    def __init__(self, path: Path, values: bool) -> None:
+        self.path, self.values, self.files = path, values, {}
+
+    def __enter__(self) -> _Items:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for f in self.files.values():
+            f.close()
+
+    def grids(self) -> list:
+        """The time levels' Grid elements."""
+        try:
+            root = ET.parse(self.path).getroot()
+        except ET.ParseError as exc:
+            raise ResultsError(self.path, f"not readable XML ({exc})") from None
+        except OSError as exc:
+            raise ResultsError(self.path, f"cannot be read ({exc.strerror or exc})") from None
+        collection = root.find("Domain/Grid")
+        grids = [] if collection is None else collection.findall("Grid")
+        if not grids:
+            raise ResultsError(self.path, "lists no time levels (no Domain/Grid/Grid elements)")
+        return grids
+
+    def time(self, grid, i: int) -> float:
+        """The level's time value (finite)."""
+        element = grid.find("Time")
+        try:
+            t = float(element.get("Value"))
+        except (AttributeError, TypeError, ValueError):
+            raise ResultsError(self.path, f"level {i}: no time value (a Time element with a number)") from None
+        if not np.isfinite(t):
+            raise ResultsError(self.path, f"level {i}: time value {t}")
+        return t
+
+    def _file(self, name: str):
+        import h5py
+
+        if name not in self.files:
+            target = self.path.parent / name
+            if not target.is_file():
+                raise ResultsError(target, f"does not exist (named by {self.path.name})")
+            try:
+                self.files[name] = h5py.File(target, "r")
+            except OSError as exc:  # truncated, not HDF5, unreadable
+                raise ResultsError(target, f"not a readable HDF5 file ({str(exc).splitlines()[0]})") from None
+        return self.files[name]
+
+    def load(self, item, what: str, numeric: str = "iuf", read: bool = True) -> np.ndarray:
+        """The array a DataItem names (``FILE.h5:/DATASET``), of the shape the XML says; ``read=False``: zeros of
+        that shape, taking no memory (the dataset's presence, shape and type checked, its values not read)."""
+        import h5py
+
+        text = "" if item is None or item.text is None else item.text.strip()
+        name, sep, dataset = text.partition(":")
+        if not (name and sep and dataset):
+            raise ResultsError(self.path, f"{what}: the DataItem names no FILE.h5:/DATASET ({text[:80]!r})")
+        try:
+            dims = tuple(int(d) for d in item.get("Dimensions", "").split())
+        except ValueError:
+            raise ResultsError(self.path, f"{what}: Dimensions {item.get('Dimensions')!r} are not integers") from None
+        target, h5 = self.path.parent / name, self._file(name)
+        try:
+            data = h5.get(dataset)
+        except (ValueError, TypeError, KeyError, OSError) as exc:  # a damaged (truncated) group, a bad name
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ResultsError(target, f"{dataset} cannot be looked up: damaged or truncated? ({reason})") from None
+        if not isinstance(data, h5py.Dataset):
+            raise ResultsError(target, f"has no dataset {dataset} ({what}, named by {self.path.name})")
+        if data.shape != dims or data.dtype.kind not in numeric:
+            raise ResultsError(target, f"{dataset}: {data.dtype} of shape {data.shape}, {self.path.name} says "
+                                       f"{'numbers' if numeric == 'iuf' else 'integers' if 'i' in numeric else 'floats'}"
+                                       f" of shape {dims}")
+        if not read:
+            return np.broadcast_to(np.zeros((), data.dtype), dims)
+        try:
+            return data[...]
+        except (OSError, ValueError) as exc:  # a damaged chunk
+            raise ResultsError(target, f"{dataset}: cannot be read ({str(exc).splitlines()[0]})") from None

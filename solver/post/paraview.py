@@ -7,6 +7,7 @@ so without a display we start a private ``Xvfb`` (package ``xvfb``) for the rend
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -14,6 +15,8 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from solver.errors import ResultsError
 
 SCRIPT = Path(__file__).with_name("paraview_script.py")
 NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get install paraview python3-paraview xvfb)"
@@ -96,6 +99,30 @@ def virtual_display(xvfb: str) -> Iterator[str]:
                 proc.wait()
 
 
+def check_results(argv: list[str]) -> int | None:
+    """The script's command line parsed here, and the directory checked, before ParaView starts: an exit code for
+    a command line argparse ends (``--help``: 0; a bad option: 2, its usage and error printed), else None. A
+    damaged results directory is a :class:`ResultsError` (the file and what is wrong): VTK's readers print pages of
+    errors, or abort, on a truncated ``.h5`` or an XDMF naming a missing file. The XML and every dataset's presence,
+    type and shape are checked with h5py; the field values are not read."""
+    from solver.io.xdmf import read_series
+
+    spec = importlib.util.spec_from_file_location("paraview_script", SCRIPT)
+    script = importlib.util.module_from_spec(spec)
+    path = list(sys.path)
+    try:
+        spec.loader.exec_module(script)
+        given = Path(script.parse_args(argv).results)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else 2
+    finally:
+        sys.path[:] = path  # the script drops this folder from the path
+    series = given / "solution.xdmf" if given.is_dir() else given
+    if series.is_file():  # no solution.xdmf: the script says so, after saying ParaView's Python modules are missing
+        read_series(series, values=False)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ParaView render with ``argv`` (default ``sys.argv[1:]``); returns its exit code (2 if ParaView is missing)."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -103,6 +130,13 @@ def main(argv: list[str] | None = None) -> int:
     if exe is None:
         print(NOT_INSTALLED, file=sys.stderr)
         return 2
+    try:
+        code = check_results(argv)
+    except ResultsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if code is not None:
+        return code
     cmd, env = command(argv, exe), environment()
     sys.stdout.flush()
     xvfb = shutil.which("Xvfb")

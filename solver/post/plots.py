@@ -28,8 +28,9 @@ def _grid(res: dict, t: float, warp: float):
 
     x = np.zeros((res["geometry"].shape[0], 3))
     x[:, : res["geometry"].shape[1]] = res["geometry"]
-    u = res["fields"]["displacement"][t]
-    x[:, : u.shape[1]] += warp * u[:, : x.shape[1]]
+    u = res["fields"].get("displacement", {}).get(t)  # no displacement written: the undeformed body
+    if u is not None:
+        x[:, : u.shape[1]] += warp * u[:, : x.shape[1]]
     cells = res["topology"]
     kind = {3: pv.CellType.TRIANGLE, 4: pv.CellType.TETRA}[cells.shape[1]]
     conn = np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).ravel()
@@ -39,21 +40,31 @@ def _grid(res: dict, t: float, warp: float):
 def auto_warp(res: dict) -> float:
     """Largest displacement drawn as 10 % of the body's size (rounded to 1, 2 or 5 x 10^m)."""
     size = np.ptp(res["geometry"], axis=0).max()
-    umax = max(np.abs(v).max() for v in res["fields"]["displacement"].values())
-    if umax == 0:
+    tops = [_finite_max(np.abs(v)) for v in res["fields"].get("displacement", {}).values()]
+    umax = max((m for m in tops if np.isfinite(m)), default=0.0)
+    if not umax > 0:  # nothing moves (or no displacement was written, or none of it is finite)
         return 1.0
     w = 0.1 * size / umax
     e = 10 ** np.floor(np.log10(w))
     return float(max(m for m in (1, 2, 5) if m * e <= w) * e)
 
 
+def _finite_max(values: np.ndarray) -> float:
+    """The largest finite value (nan if there is none): a damaged or diverged field still draws."""
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else float("nan")
+
+
 def _range(values: np.ndarray, clim):
     """The colour range, and a note for the title: a constant field gets a range around its value (a zero-width
     one draws it in the colour map's end colour, black for magma, and hides the bar's ticks)."""
-    lo, hi = (float(np.min(values)), float(np.max(values))) if clim is None else clim
+    finite = values[np.isfinite(values)]
+    if clim is None or not np.isfinite(clim).all():
+        clim = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
+    lo, hi = clim
     if hi - lo > 1e-12 * max(abs(lo), abs(hi), 1e-300):
         return (lo, hi), ""
-    v = float(np.mean(values))
+    v = float(np.mean(finite)) if finite.size else 0.0
     pad = 0.5 * abs(v) if v else 1.0
     return (v - pad, v + pad), f" -- constant: {v:.6g} everywhere"
 
@@ -163,39 +174,52 @@ def contact_profiles(profile: dict, out: Path) -> list[Path]:
 
 def plot_results(directory: str | Path, warp: float | None = None, out: str | Path | None = None,
                  extra_times: tuple[float, ...] = ()) -> list[Path]:
-    """Write the PNGs of a results directory (plus von Mises at ``extra_times``); returns their paths."""
+    """Write the PNGs of a results directory (plus von Mises at ``extra_times``); returns their paths. Everything is
+    read (and a damaged file refused, :class:`ResultsError`) before the first picture is written."""
     directory = Path(directory)
     out = Path(out) if out else directory
     res = read_results(directory)
-    times = res["times"]
-    nearest = [_nearest_level(times, t) for t in extra_times]  # refused before anything is drawn
+    rows, profile = _read_tables(directory)
+    nearest = [_nearest_level(res["times"], t) for t in extra_times]  # refused before anything is drawn
     out.mkdir(parents=True, exist_ok=True)
     w = warp if warp is not None else auto_warp(res)
     made = []
     for field, what in (("von_mises_elastic", "A eps(u)"), ("von_mises", "sigma = A eps(u) + memory")):
-        if field not in res["fields"]:
+        if not res["fields"].get(field):
             continue
         vm = res["fields"][field]
-        clim = (0.0, max(float(np.max(v)) for v in vm.values()))  # one colour scale for both times
-        picks = [("initial", times[0]), ("final", times[-1])]
+        tops = [m for m in map(_finite_max, vm.values()) if np.isfinite(m)]
+        clim = (0.0, max(tops, default=float("nan")))  # one colour scale for both times (nan: from the values)
+        written = sorted(vm)  # the levels that hold the field (a restart may change output.fields)
+        picks = [("initial", written[0]), ("final", written[-1])]
         for near in nearest:
-            picks.append((f"t{near:g}".replace(".", "_"), near))
+            if near in vm:
+                picks.append((f"t{near:g}".replace(".", "_"), near))
         for label, t in picks:
             path = out / f"{field}_{label}.png"
             render(res, field, t, w, path, f"von Mises norm of {what} ({label})", clim=clim, cmap="turbo")
             made.append(path)
-    if "damage" in res["fields"]:
+    if res["fields"].get("damage"):
         path = out / "damage_final.png"
-        render(res, "damage", times[-1], w, path, "damage zeta (final)", cmap="magma")
+        render(res, "damage", max(res["fields"]["damage"]), w, path, "damage zeta (final)", cmap="magma")
         made.append(path)
-    csv_path = directory / "timeseries.csv"
-    if csv_path.exists():
+    if rows is not None:
         path = out / "timeseries.png"
-        timeseries(read_csv(csv_path), path)
+        timeseries(rows, path)
         made.append(path)
-    if (directory / "contact.csv").exists():
-        made += contact_profiles(read_profile(directory / "contact.csv"), out)
+    if profile is not None:
+        made += contact_profiles(profile, out)
     return made
+
+
+TIMESERIES_COLUMNS = ("t", "contact_force", "zeta_min", "strain_norm")
+
+
+def _read_tables(directory: Path) -> tuple[list[dict] | None, dict | None]:
+    """timeseries.csv's rows and contact.csv's profiles (None where the file is absent), read before any picture."""
+    csv_path, contact = directory / "timeseries.csv", directory / "contact.csv"
+    rows = read_csv(csv_path, need=TIMESERIES_COLUMNS) if csv_path.exists() else None
+    return rows, (read_profile(contact) if contact.exists() else None)
 
 
 def _nearest_level(times: list[float], t: float) -> float:
