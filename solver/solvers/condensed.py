@@ -40,13 +40,11 @@ from petsc4py import PETSc
 from solver.config import SolverConfig
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
-from solver.solvers.damped_newton import DampedResult, has_energy
+from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
 from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
 from solver.solvers.linear import REASONS_SNES, direct_options, set_options
 
 MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
-LINE_RTOL = 1e-2  # as damped_newton.LINE_RTOL
-LINE_ITERATIONS = 30
 POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
 
 
@@ -350,27 +348,7 @@ class Reduced:
         def dphi(lam: float) -> float:
             return float(self.evaluate(v + lam * d)[0] @ w)
 
-        lo, flo, hi = 0.0, float(H @ w), 1.0
-        slope = flo
+        slope = float(H @ w)
         if slope >= 0.0:
             return 1.0
-        fhi = dphi(hi)
-        if fhi <= 0.0:
-            return 1.0
-        side, lam = 0, 1.0
-        for _ in range(LINE_ITERATIONS):
-            lam = (lo * fhi - hi * flo) / (fhi - flo)
-            f = dphi(lam)
-            if abs(f) <= LINE_RTOL * abs(slope):
-                return lam
-            if f < 0.0:
-                lo, flo = lam, f
-                if side == -1:
-                    fhi *= 0.5
-                side = -1
-            else:
-                hi, fhi = lam, f
-                if side == 1:
-                    flo *= 0.5
-                side = 1
-        return lo if lo > 0.0 else lam
+        return illinois_root(dphi, slope)

@@ -127,11 +127,18 @@ def _line_minimum(problem, x, d, y, F, slope: float, iterative: bool) -> float:
         problem.evaluate(y, F)
         return F.dot(d)
 
+    return illinois_root(dphi, slope)
+
+
+def illinois_root(dphi: Callable[[float], float], slope: float) -> float:
+    """lam in (0, 1] where a convex phi is least along a descent direction (slope = phi'(0) < 0): the root of phi'
+    by the Illinois regula falsi, to LINE_RTOL of the slope; 1 where phi' stays negative up to the full step. The
+    line search of the damped fallback, of newton_energy and of newton_condensed's reduced iteration."""
     lo, flo, hi = 0.0, slope, 1.0
     fhi = dphi(hi)
     if fhi <= 0.0:  # E decreases all the way: the full step
         return 1.0
-    side = 0
+    side, lam = 0, 1.0
     for _ in range(LINE_ITERATIONS):
         lam = (lo * fhi - hi * flo) / (fhi - flo)
         f = dphi(lam)
