@@ -24,6 +24,11 @@ round-off on B (about 1e-6 in ||F||). Plain Newton's test decides, on the full F
 tolerance. A level these full steps do not settle in POLISH_STEPS goes to energy_newton's iteration, with
 factorizations of K + C.
 
+In 2-D (linear and limited-penetration laws) the iteration on v runs on the contact term at its quadrature points
+(:class:`PointContact`, :class:`PointReduced`): sparse products instead of facet assemblies, an exact line search
+from the kinks of the piecewise-quadratic E, the active set looking ahead along the step after a damped one, and a
+first set predicted from the last two levels (docs/model.md §3.3).
+
 Only where it applies (:func:`applies`): a contact energy (no implicit memory term), a piecewise linear law, a
 direct linear solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the method is newton_energy.
 """
@@ -32,12 +37,14 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
+import scipy.sparse as sp
 from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import SolverConfig
+from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
@@ -45,7 +52,11 @@ from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
 from solver.solvers.linear import REASONS_SNES, direct_options, set_options
 
 MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
-POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
+POLISH_STEPS = 3
+# the first step's active set is the one at v + PREDICT (v - v_prev), v_prev the last level's start: half the last
+# level's motion guessed best on hard.toml with P2 (n = 16 / 32 / 48: 160 / 193 / 197 iterations at 0.5, 165 / 214 /
+# 220 at 1, 179 / 222 / 228 without a prediction; scripts/nonlinear_bench.py's cases)
+PREDICT = 0.5  # full Newton steps solved through K after the condensed iteration, before a factorization
 
 
 def applies(problem: DisplacementProblem, settings: SolverConfig, m: int) -> bool:
@@ -99,6 +110,136 @@ def _free_mask(x: PETSc.Vec, bcs) -> np.ndarray:
     fpetsc.set_bc(x, bcs)  # g there
     one.destroy()
     return a == x.array_r
+
+
+class PointContact:
+    """The contact term on the contact dofs at its quadrature points (2-D; :class:`ContactPoints`), the same on every
+    rank: u_nu - g = r(v) = N_B v + c (c: the level's other dofs and the gap), j_B(v) = N_B^T W p(r) and
+    C_BB = N_B^T W p'(r) N_B. p is piecewise linear in each point's r, so along a line v + lam d every r_q is
+    affine in lam and the level's energy is piecewise quadratic with its kinks where some r_q crosses 0 (or the
+    limited-penetration depth): :meth:`line_minimum` finds its exact minimum from them."""
+
+    def __init__(self, points: ContactPoints, dofs: ContactDofs, u: fem.Function) -> None:
+        comm = dofs.comm
+        index = fem.Function(u.function_space)  # each local dof's place among the m contact dofs (-1: none)
+        index.x.array[:] = 0.0
+        index.x.array[dofs.local] = dofs.offset + np.arange(len(dofs.local)) + 1.0
+        index.x.scatter_forward()
+        place = np.rint(index.x.array).astype(np.int64) - 1
+        self.on_b = place >= 0  # the local dofs (ghosts too) on B
+        N = points.N.tocoo()
+        keep = self.on_b[N.col]
+        counts = comm.allgather(points.N.shape[0])
+        first = int(sum(counts[:comm.rank]))
+        rows = comm.allgather(N.row[keep] + first)
+        cols = comm.allgather(place[N.col[keep]])
+        vals = comm.allgather(N.data[keep])
+        self.q = int(sum(counts))
+        self.NB = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(self.q, dofs.m))
+        self.NBT = self.NB.T.tocsr()
+        self.N_rest = points.N  # this rank's points, all local dofs (B's are zeroed in the vector it is given)
+        self.g = points.g
+        self.counts = counts
+        self.comm = comm
+
+        def gathered(a: np.ndarray) -> np.ndarray:
+            return np.concatenate(comm.allgather(np.asarray(a, dtype=float)))
+
+        self.W = gathered(points.W)
+        self.inv_mu, self.depth = gathered(points.inv_mu), gathered(points.depth)
+        self.inv_mu_stiff = gathered(points.inv_mu_stiff)
+        self.limited = np.isfinite(self.depth)
+        self.c = np.zeros(self.q)
+
+    @staticmethod
+    def applies(points: ContactPoints | None) -> bool:
+        """Whether every point has a piecewise linear law (no power law)."""
+        return points is not None and not points.power.any()
+
+    def level(self, x: np.ndarray) -> None:
+        """c for the level: x is u0's local array (ghosts included), whose values on B are left out."""
+        x = np.where(self.on_b, 0.0, x)
+        self.c = np.concatenate(self.comm.allgather(self.N_rest @ x - self.g)) if self.comm.size > 1 else \
+            self.N_rest @ x - self.g
+
+    def state(self, r: np.ndarray) -> np.ndarray:
+        """Per point: 0 no contact, 1 in contact, 2 beyond a limited-penetration depth (the active set)."""
+        s = (r > 0.0).astype(np.int8)
+        if self.limited.any():
+            s += (self.limited & (r > self.depth)).astype(np.int8)
+        return s
+
+    def slopes(self, state: np.ndarray) -> np.ndarray:
+        """W p'(r) per point for an active set."""
+        k = np.where(state > 0, self.inv_mu, 0.0)
+        return self.W * np.where(state > 1, k + self.inv_mu_stiff, k)
+
+    def pressure(self, r: np.ndarray) -> np.ndarray:
+        p = np.maximum(r, 0.0) * self.inv_mu
+        if self.limited.any():
+            p = p + np.where(self.limited, np.maximum(r - self.depth, 0.0) * self.inv_mu_stiff, 0.0)
+        return p
+
+    def piece_force(self, r: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """j_B of an active set's quadratic piece at r: the law taken affine on the set's points (r/mu where in
+        contact, plus (r - depth)/mu_stiff beyond the depth), zero off it; j_B itself where the set is r's."""
+        p = np.where(state > 0, r * self.inv_mu, 0.0)
+        if self.limited.any():
+            p = p + np.where(state > 1, (r - self.depth) * self.inv_mu_stiff, 0.0)
+        return self.NBT @ (self.W * p)
+
+    def force(self, r: np.ndarray) -> np.ndarray:
+        """j_B at the points' r."""
+        return self.NBT @ (self.W * self.pressure(r))
+
+    def jacobian(self, state: np.ndarray) -> np.ndarray:
+        """C_BB (m x m, dense) for an active set."""
+        return (self.NBT @ sp.diags(self.slopes(state)) @ self.NB).toarray()
+
+    def kinks(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The lam in (0, 1) where r + lam s crosses a kink of p, sorted."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = [-r / s]
+            if self.limited.any():
+                lam.append(np.where(self.limited, (self.depth - r) / s, np.nan))
+        lam = np.concatenate(lam)
+        return np.unique(lam[np.isfinite(lam) & (lam > 0.0) & (lam < 1.0)])
+
+    def line_minimum(self, alpha: float, beta: float, r: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:
+        """The exact minimum in (0, 1] of phi(lam) = E(v + lam d) and the active set just beyond it along d.
+
+        phi'(lam) = alpha + lam beta + s.W p(r + lam s), with alpha = (v - P u0).S^{-1} d, beta = d.S^{-1} d and
+        r, s the points' r at v and its change along d. phi' is continuous, piecewise linear and nondecreasing:
+        its root is found by bisection over the kinks and one linear interpolation (1 where phi' < 0 up to the
+        full step, or where d is no descent direction). The set returned is the one just past the minimum along
+        d: a point the minimum stops at, on its kink, counts as entering contact where s > 0 (the directional
+        derivative), so that Newton's next step sees the point that stopped this one."""
+        def dphi(lam: float) -> float:
+            return alpha + lam * beta + float(s @ (self.W * self.pressure(r + lam * s)))
+
+        knots = np.concatenate([[0.0], self.kinks(r, s), [1.0]])
+        values = {0: dphi(0.0)}
+        lo, hi = 0, len(knots) - 1
+        values[hi] = dphi(1.0)
+        if values[hi] <= 0.0 or values[0] >= 0.0:  # E decreases up to the full step (or d is no descent)
+            lam, after = 1.0, 1.0
+        else:
+            while hi - lo > 1:  # phi'(knots[lo]) < 0 <= phi'(knots[hi])
+                mid = (lo + hi) // 2
+                values[mid] = dphi(knots[mid])
+                if values[mid] < 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            a, b = values[lo], values[hi]
+            lam = knots[lo] + (knots[hi] - knots[lo]) * (-a / (b - a))
+            if b == 0.0 or lam >= knots[hi] * (1.0 - 1e-12):  # the minimum is the kink itself
+                lam = knots[hi]
+                after = 0.5 * (knots[hi] + knots[hi + 1]) if hi + 1 < len(knots) else 1.0
+            else:
+                after = 0.5 * (lam + knots[hi])
+        return float(lam), self.state(r + after * s)
 
 
 class Condensation:
@@ -158,12 +299,16 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
     where the condensation does not apply, energy_newton's method."""
 
     def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm, facets: np.ndarray,
-                 fdim: int) -> None:
+                 fdim: int, points: ContactPoints | None = None) -> None:
         super().__init__(problem, settings, comm)
         self.dofs = ContactDofs(problem.u, facets, fdim, problem.bcs, comm) if self.energy else None
         self.on = self.energy and applies(problem, settings, self.dofs.m)
+        # the contact term at its points on B (2-D): the reduced iteration of PointReduced; else Reduced's forms
+        self.points = PointContact(points, self.dofs, problem.u) if self.on and PointContact.applies(points) \
+            else None
         self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
         self.reduced_iterations = 0  # over the run
+        self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start
         self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)] if self.on else []
 
     def solve(self, scale: float) -> SolveInfo:
@@ -178,14 +323,23 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         else:
             first = 0
         self.test.scale = scale
-        history, v, step = Reduced(self, scale).run()
+        reduced = (PointReduced if self.points is not None else Reduced)(self, scale)
+        history, v, step = reduced.run()
         its = len(history)
         self.reduced_iterations += its
         if its > 0:  # else the level starts from u itself, as energy_newton's would
             c = sla.cho_solve(self.cond.chol, self.cond.u0_B - v)
             self.cond.rebuild(c, self.problem.u.vector)
             self.problem.u.x.scatter_forward()
-        out = self._polish(history, step)
+        piece = None
+        if self.points is not None and reduced.state is not None:  # the piece the reduced iteration ended on,
+            pc = self.points                                       # where it is not v's own active set
+            r = pc.NB @ v + pc.c
+            if not np.array_equal(reduced.state, pc.state(r)):
+                piece = (pc.jacobian(reduced.state), pc.piece_force(r, reduced.state) - pc.force(r))
+            # (on v's own set Newton's step at u is that piece's solution, with C assembled as the residual is:
+            # C from the points differs from it by round-off, which 1/mu = 1e12 makes worth a second step)
+        out = self._polish(history, step, piece)
         if out.reason < 0:  # not settled by Newton steps solved through K: energy_newton's full iteration
             ksp = self.snes.getKSP()
             ksp.setOperators(self.problem.J, self.problem.J)
@@ -199,12 +353,18 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         name = REASONS_SNES.get(out.reason, str(out.reason))
         return self._finish(out, name, scale)
 
-    def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec) -> float:
+    def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec, piece=None) -> float:
         """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
-        the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d|. Two solves with K."""
+        the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d|. Two solves with K. ``piece``: (C_BB,
+        dj_B) of the quadratic piece the reduced iteration ended on, the step then solving that piece (F + P^T dj_B
+        is its residual); default: Newton's step, C assembled at u."""
         problem, dofs, cond = self.problem, self.dofs, self.cond
-        assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
-        C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
+        if piece is not None:
+            C, dj = piece
+            F.array[dofs.local] += dofs.mine(dj)
+        else:
+            assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
+            C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
         cond.ksp.solve(F, d)  # K^{-1} F
         dB = -np.linalg.solve(np.eye(dofs.m) + cond.S @ C, dofs.gather(d.array_r[dofs.local]))
         d.scale(-1.0)
@@ -214,7 +374,7 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         u.axpy(1.0, d)
         return d.norm()
 
-    def _polish(self, history: list[float], step: float) -> DampedResult:
+    def _polish(self, history: list[float], step: float, piece=None) -> DampedResult:
         """Full Newton steps from the rebuilt u, each solved through K (:meth:`_step_through_k`, no
         factorization), under plain Newton's test; at most POLISH_STEPS of them, taken in full (u is within
         round-off of the level's solution). ``history``: ||F|| before each iteration done on v (they are counted
@@ -247,7 +407,7 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
                     out.history[-1], out.reason = keep_norm, R.CONVERGED_SNORM_RELATIVE
                 break
             out.iterations += 1
-            snorm = self._step_through_k(u, F, d)
+            snorm = self._step_through_k(u, F, d, piece if it == 0 else None)
         if keep is not None:
             keep.destroy()
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -352,3 +512,66 @@ class Reduced:
         if slope >= 0.0:
             return 1.0
         return illinois_root(dphi, slope)
+
+
+class PointReduced(Reduced):
+    """:class:`Reduced` with the contact term at its quadrature points (:class:`PointContact`), as an active-set
+    iteration: each step solves the quadratic piece of the level's energy that an active set names (the contact
+    law taken affine, p = r/mu, on its points), from the set predicted by the last two levels' contact dofs
+    (linear extrapolation) at the level's first step and from the set the last step reached after that. A step
+    whose end keeps its set has found the level's solution: _polish takes it through K. Otherwise the end is
+    taken where it is new and lowers ||F|| (or on the level's first FREE_STEPS), else the exact minimum of the
+    level's energy along the step (from the kinks) with the set just beyond it along the step (a point the line
+    search stopped at, entering contact, is in it: the directional derivative). Every evaluation is a sparse
+    product on the m contact dofs, not a facet assembly."""
+
+    def run(self) -> tuple[list[float], np.ndarray, float]:
+        cond, settings, pc, solver = self.cond, self.solver.settings, self.solver.points, self.solver
+        cond.u0_B = cond.level()
+        cond.u0.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with cond.u0.localForm() as local:
+            pc.level(local.array_r)
+        a, S = cond.u0_B, cond.S
+        v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
+        r = pc.NB @ v + pc.c
+        state = pc.state(r)
+        H = v - a + S @ pc.force(r)
+        fnorm = self.fnorm(H)
+        if solver.previous is not None and PREDICT > 0.0:  # the set the last two levels' motion leads to
+            state = pc.state(pc.NB @ (v + PREDICT * (v - solver.previous)) + pc.c)
+        solver.previous = v
+        seen, history = [state.tobytes()], []
+        snorm = 0.0
+        unorm = max(self.problem.u.vector.norm(), 1e-300)
+        eye = np.eye(len(v))
+        for _ in range(settings.max_it * 8):
+            self.state = state
+            if fnorm <= settings.rtol * self.scale:
+                self.state = None
+                return history, v, snorm
+            Hp = v - a + S @ pc.piece_force(r, state)  # H of the set's quadratic piece (H itself on v's set)
+            d = -np.linalg.solve(eye + S @ pc.jacobian(state), Hp)
+            s = pc.NB @ d
+            ry = r + s
+            statey = pc.state(ry)
+            if np.array_equal(statey, state):  # the step solves its piece and stays in it: _polish takes it
+                return history, v, snorm
+            history.append(fnorm)
+            y = v + d
+            Hy = y - a + S @ pc.force(ry)
+            fy = self.fnorm(Hy)
+            if statey.tobytes() not in seen and (len(seen) <= FREE_STEPS or fy < fnorm):
+                v, r, H, state, fnorm = y, ry, Hy, statey, fy
+            else:
+                w = sla.cho_solve(cond.chol, d)
+                lam, state = pc.line_minimum(float((v - a) @ w), float(d @ w), r, s)
+                v, r = v + lam * d, r + lam * s
+                H = v - a + S @ pc.force(r)
+                fnorm = self.fnorm(H)
+            seen.append(state.tobytes())
+            snorm = float(np.linalg.norm(d))
+            if snorm <= settings.rtol * unorm and self.step_test(v, d):
+                self.state = None
+                return history, v, snorm
+        self.state = None
+        return history, v, snorm

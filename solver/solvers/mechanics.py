@@ -69,7 +69,7 @@ class Mechanics:
             self.solver = EnergyNewtonSolver(self.problem, settings, geo.comm)
         elif self.method == "newton_condensed":
             facets = np.concatenate([geo.facets(p.name) for p in parts])
-            self.solver = CondensedNewtonSolver(self.problem, settings, geo.comm, facets, geo.dim - 1)
+            self.solver = CondensedNewtonSolver(self.problem, settings, geo.comm, facets, geo.dim - 1, points)
         elif self.method == "fixed_point":
             self.solver = FixedPointSolver(self.problem, points, settings, geo.comm)
         else:

@@ -11,7 +11,7 @@ from petsc4py import PETSc
 from solver.config import load
 from solver.io.results import run
 from solver.run.model import build_model
-from solver.solvers.condensed import CondensedNewtonSolver
+from solver.solvers.condensed import CondensedNewtonSolver, Reduced
 
 # test_energy_newton.py's scene: hard.toml with P2, where at t = 0.45 plain Newton cycles and needs its fallback
 CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
@@ -70,3 +70,84 @@ def test_where_it_does_not_apply_it_is_newton_energy(comm, extra):
     assert [r["newton_iterations"] for r in rows] == [r["newton_iterations"] for r in ref]
     rel = 1e-12 if comm.size == 1 else 1e-8  # two builds on 2 ranks may partition differently
     assert [r["contact_force"] for r in rows] == pytest.approx([r["contact_force"] for r in ref], rel=rel)
+
+
+def _hard_p2(comm, extra=()):
+    """hard.toml with P2 at n = 16, k = 0.01 (the levels where the contact zone moves most: t = 0.25-0.63)."""
+    sets = ["discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2", "output.xdmf=false",
+            "solver.method='newton_condensed'", *extra]
+    model = build_model(load(ROOT / "configs" / "hard.toml", sets), comm)
+    return model, run(model, None)
+
+
+def test_the_points_are_the_forms(comm):
+    """PointContact's j_B and C_BB (sparse products at the quadrature points) equal the facet assembly's (Reduced's
+    forms) at displacements on both sides of the contact, on any number of ranks."""
+    model, _ = _hard_p2(comm, ["time.T=0.3"])
+    solver = model.mech.solver
+    assert solver.points is not None
+    forms, pc = Reduced(solver, 1.0), solver.points
+    a, S = solver.cond.u0_B, solver.cond.S
+    rng = np.random.default_rng(comm.size)
+    v0 = solver.dofs.gather(model.u.vector.array_r[solver.dofs.local])
+    for scale in (0.0, 1e-3, 1e-2):
+        v = v0 + scale * comm.bcast(rng.standard_normal(len(v0)), root=0) * np.abs(v0).max()
+        H, C, _ = forms.evaluate(v)
+        r = pc.NB @ v + pc.c
+        assert 0 < (r > 0).sum() < len(r)  # points in contact and out of it
+        Hp = v - a + S @ pc.force(r)
+        # the two compute u_nu at a point with different round-off (~eps |u|), which the law multiplies by 1/mu
+        # (1e10): the bound is that error carried through W and S; a wrong N or W would be off by O(|S j_B|)
+        roundoff = 10 * np.finfo(float).eps * pc.inv_mu.max() * np.abs(v).max() * np.abs(S).max()
+        assert np.abs(H - Hp).max() <= roundoff < 1e-6 * np.abs(S @ pc.force(r)).max()
+        Cp = pc.jacobian(pc.state(r))
+        assert np.abs(C - Cp).max() <= 1e-12 * np.abs(C).max()
+
+
+def test_the_line_search_is_exact_and_looks_ahead(comm):
+    """line_minimum's lam is where phi' = (v + lam d - P u0).S^{-1} d + j_B(v + lam d).d changes sign (phi' is
+    continuous and nondecreasing), and the set it returns is the one just past lam along d."""
+    model, _ = _hard_p2(comm, ["time.T=0.3"])
+    solver = model.mech.solver
+    pc, a, chol = solver.points, solver.cond.u0_B, solver.cond.chol
+    import scipy.linalg as sla
+    rng = np.random.default_rng(7)
+    v = solver.dofs.gather(model.u.vector.array_r[solver.dofs.local])
+    stops = 0
+    for _ in range(20):
+        d = comm.bcast(rng.standard_normal(len(v)), root=0) * 1e-2 * np.abs(v).max()
+        w = sla.cho_solve(chol, d)
+        alpha, beta, r, s = float((v - a) @ w), float(d @ w), pc.NB @ v + pc.c, pc.NB @ d
+
+        def dphi(lam, alpha=alpha, beta=beta, r=r, s=s):
+            return alpha + lam * beta + float(s @ (pc.W * pc.pressure(r + lam * s)))
+
+        if dphi(0.0) >= 0.0:
+            d, alpha, s = -d, -alpha, -s  # a descent direction
+        lam, state = pc.line_minimum(alpha, beta, r, s)
+        # phi' is a sum of terms of these sizes: its round-off is eps times them
+        scale = abs(alpha) + beta + float(np.abs(s) @ (pc.W * pc.pressure(r + np.maximum(s, 0.0))))
+        if lam < 1.0:
+            assert dphi(lam * (1 - 1e-9)) <= 1e-12 * scale and dphi(lam * (1 + 1e-9)) >= -1e-12 * scale
+            stops += 1
+        else:
+            assert dphi(1.0) <= 1e-12 * scale
+        kinks = pc.kinks(r, s)
+        after = min([k for k in kinks if k > lam * (1 + 1e-9)] + [1.0])
+        assert np.array_equal(state, pc.state(r + 0.5 * (lam + after) * s))
+    assert stops > 0
+
+
+def test_moving_levels_in_few_iterations(comm):
+    """hard.toml with P2, n = 16: no level above 10 iterations (14 at t = 0.34 before the exact line search,
+    the set looking ahead and the predicted set: the line search stopped at the same kink again and again) and
+    the whole run in fewer iterations than newton_energy's, with the same levels."""
+    _, rows = _hard_p2(comm)
+    its = [r["newton_iterations"] for r in rows]
+    assert max(its) <= 10
+    _, ref = _hard_p2(comm, ["solver.method='newton_energy'"])
+    assert sum(its) < sum(r["newton_iterations"] for r in ref)
+    for a, b in zip(rows, ref, strict=True):
+        assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-7, abs=1e-9)
+        assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-9)
+        assert a["zeta_norm"] == pytest.approx(b["zeta_norm"], rel=1e-9)
