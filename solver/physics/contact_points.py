@@ -53,6 +53,20 @@ def _facet_basis(element, x: np.ndarray, dofs, da, db, s: np.ndarray) -> list:
     return [tuple(zip(dofs, phi[q])) for q in range(len(s))]
 
 
+def law_pressure(r: np.ndarray, inv_mu: np.ndarray, depth: np.ndarray, inv_mu_stiff: np.ndarray,
+                 coefficient: np.ndarray, exponent: np.ndarray) -> np.ndarray:
+    """p(r) per point from the law's columns (:func:`_law_row`): r_+ / mu, plus (r - depth)_+ / mu_stiff where the
+    depth is finite; c r_+^m where c > 0 (the power law)."""
+    p = np.maximum(r, 0.0) * inv_mu
+    m = np.isfinite(depth)
+    if m.any():
+        p[m] += np.maximum(r[m] - depth[m], 0.0) * inv_mu_stiff[m]
+    m = coefficient > 0
+    if m.any():
+        p[m] = coefficient[m] * np.maximum(r[m], 0.0) ** exponent[m]
+    return p
+
+
 class ContactPoints:
     """The contact term at its quadrature points: u_nu - g = N u - g and j(u) = N^T W p(N u - g).
 
@@ -124,14 +138,7 @@ class ContactPoints:
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
         """p(r) at the points, each with its part's law (the linear law: r_+ / mu, as in the UFL term)."""
-        p = np.maximum(r, 0.0) * self.inv_mu
-        if self.limited.any():
-            m = self.limited
-            p[m] += np.maximum(r[m] - self.depth[m], 0.0) * self.inv_mu_stiff[m]
-        if self.power.any():
-            m = self.power
-            p[m] = self.coefficient[m] * np.maximum(r[m], 0.0) ** self.exponent[m]
-        return p
+        return law_pressure(r, self.inv_mu, self.depth, self.inv_mu_stiff, self.coefficient, self.exponent)
 
     def max_penetration(self, u_local) -> float:
         r = self.penetration(u_local)

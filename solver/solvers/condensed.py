@@ -44,7 +44,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import SolverConfig
-from solver.physics.contact_points import ContactPoints
+from solver.physics.contact_points import ContactPoints, law_pressure
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
@@ -52,11 +52,11 @@ from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
 from solver.solvers.linear import REASONS_SNES, direct_options, set_options
 
 MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
-POLISH_STEPS = 3
+POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
 # the first step's active set is the one at v + PREDICT (v - v_prev), v_prev the last level's start: half the last
 # level's motion guessed best on hard.toml with P2 (n = 16 / 32 / 48: 160 / 193 / 197 iterations at 0.5, 165 / 214 /
 # 220 at 1, 179 / 222 / 228 without a prediction; scripts/nonlinear_bench.py's cases)
-PREDICT = 0.5  # full Newton steps solved through K after the condensed iteration, before a factorization
+PREDICT = 0.5
 
 
 def applies(problem: DisplacementProblem, settings: SolverConfig, m: int) -> bool:
@@ -140,17 +140,18 @@ class PointContact:
         self.NBT = self.NB.T.tocsr()
         self.N_rest = points.N  # this rank's points, all local dofs (B's are zeroed in the vector it is given)
         self.g = points.g
-        self.counts = counts
         self.comm = comm
-
-        def gathered(a: np.ndarray) -> np.ndarray:
-            return np.concatenate(comm.allgather(np.asarray(a, dtype=float)))
-
-        self.W = gathered(points.W)
-        self.inv_mu, self.depth = gathered(points.inv_mu), gathered(points.depth)
-        self.inv_mu_stiff = gathered(points.inv_mu_stiff)
+        self.W = self._gathered(points.W)
+        self.inv_mu, self.depth = self._gathered(points.inv_mu), self._gathered(points.depth)
+        self.inv_mu_stiff = self._gathered(points.inv_mu_stiff)
         self.limited = np.isfinite(self.depth)
+        self._none = np.zeros(self.q)  # the power law's c and m: no point has it (applies)
         self.c = np.zeros(self.q)
+
+    def _gathered(self, a: np.ndarray) -> np.ndarray:
+        """All ranks' point values, rank by rank (the points' order in N_B)."""
+        a = np.asarray(a, dtype=float)
+        return np.concatenate(self.comm.allgather(a)) if self.comm.size > 1 else a
 
     @staticmethod
     def applies(points: ContactPoints | None) -> bool:
@@ -159,9 +160,7 @@ class PointContact:
 
     def level(self, x: np.ndarray) -> None:
         """c for the level: x is u0's local array (ghosts included), whose values on B are left out."""
-        x = np.where(self.on_b, 0.0, x)
-        self.c = np.concatenate(self.comm.allgather(self.N_rest @ x - self.g)) if self.comm.size > 1 else \
-            self.N_rest @ x - self.g
+        self.c = self._gathered(self.N_rest @ np.where(self.on_b, 0.0, x) - self.g)
 
     def state(self, r: np.ndarray) -> np.ndarray:
         """Per point: 0 no contact, 1 in contact, 2 beyond a limited-penetration depth (the active set)."""
@@ -176,10 +175,8 @@ class PointContact:
         return self.W * np.where(state > 1, k + self.inv_mu_stiff, k)
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
-        p = np.maximum(r, 0.0) * self.inv_mu
-        if self.limited.any():
-            p = p + np.where(self.limited, np.maximum(r - self.depth, 0.0) * self.inv_mu_stiff, 0.0)
-        return p
+        """p(r) at the points (ContactPoints' law)."""
+        return law_pressure(r, self.inv_mu, self.depth, self.inv_mu_stiff, self._none, self._none)
 
     def piece_force(self, r: np.ndarray, state: np.ndarray) -> np.ndarray:
         """j_B of an active set's quadratic piece at r: the law taken affine on the set's points (r/mu where in
@@ -535,8 +532,7 @@ class PointReduced(Reduced):
         v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
         r = pc.NB @ v + pc.c
         state = pc.state(r)
-        H = v - a + S @ pc.force(r)
-        fnorm = self.fnorm(H)
+        fnorm = self.fnorm(v - a + S @ pc.force(r))
         if solver.previous is not None and PREDICT > 0.0:  # the set the last two levels' motion leads to
             state = pc.state(pc.NB @ (v + PREDICT * (v - solver.previous)) + pc.c)
         solver.previous = v
@@ -558,16 +554,14 @@ class PointReduced(Reduced):
                 return history, v, snorm
             history.append(fnorm)
             y = v + d
-            Hy = y - a + S @ pc.force(ry)
-            fy = self.fnorm(Hy)
+            fy = self.fnorm(y - a + S @ pc.force(ry))
             if statey.tobytes() not in seen and (len(seen) <= FREE_STEPS or fy < fnorm):
-                v, r, H, state, fnorm = y, ry, Hy, statey, fy
+                v, r, state, fnorm = y, ry, statey, fy
             else:
                 w = sla.cho_solve(cond.chol, d)
                 lam, state = pc.line_minimum(float((v - a) @ w), float(d @ w), r, s)
                 v, r = v + lam * d, r + lam * s
-                H = v - a + S @ pc.force(r)
-                fnorm = self.fnorm(H)
+                fnorm = self.fnorm(v - a + S @ pc.force(r))
             seen.append(state.tobytes())
             snorm = float(np.linalg.norm(d))
             if snorm <= settings.rtol * unorm and self.step_test(v, d):

@@ -4,6 +4,7 @@ of K + C, and the same on every number of ranks."""
 
 import numpy as np
 import pytest
+import scipy.linalg as sla
 from conftest import ROOT
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -110,7 +111,6 @@ def test_the_line_search_is_exact_and_looks_ahead(comm):
     model, _ = _hard_p2(comm, ["time.T=0.3"])
     solver = model.mech.solver
     pc, a, chol = solver.points, solver.cond.u0_B, solver.cond.chol
-    import scipy.linalg as sla
     rng = np.random.default_rng(7)
     v = solver.dofs.gather(model.u.vector.array_r[solver.dofs.local])
     stops = 0
