@@ -308,6 +308,23 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start
         self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)] if self.on else []
 
+    def state(self) -> dict[str, np.ndarray]:
+        """What a checkpoint carries besides u: the predictor's last level start on the contact dofs (owned dofs,
+        NaN off them and before a first level), so that a restarted run predicts its first set as the
+        uninterrupted one does."""
+        if self.points is None:
+            return {}
+        out = np.full(self.problem.u.vector.getLocalSize(), np.nan)
+        if self.previous is not None:
+            out[self.dofs.local] = self.dofs.mine(self.previous)
+        return {"predictor": out}
+
+    def restore(self, name: str, values: np.ndarray) -> None:
+        """Take back :meth:`state`'s ``name`` (owned values) from a checkpoint (collective)."""
+        mine = np.asarray(values, dtype=float).ravel()[self.dofs.local]
+        known = self.dofs.comm.allreduce(bool(np.isfinite(mine).all()), op=MPI.LAND)
+        self.previous = self.dofs.gather(mine) if known else None
+
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level on the contact dofs, rebuild u, check (and finish) it with the full iteration."""
         if not self.on:

@@ -85,13 +85,21 @@ class Mechanics:
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict[str, np.ndarray]:
         """Vectors carried from one level to the next (the first residual of a level is derived from them)."""
-        return {"F_last": self.problem.F_last.array, "b": self.ops.b.array}
+        return {"F_last": self.problem.F_last.array, "b": self.ops.b.array, **self._solver_state()}
+
+    def _solver_state(self) -> dict[str, np.ndarray]:
+        """The displacement method's own carried arrays (newton_condensed's predictor; none for the others)."""
+        state = getattr(self.solver, "state", None)
+        return state() if state is not None else {}
 
     def scalars(self) -> dict[str, float]:
         return {"c_norm": self.problem.contact_norm, "reuse": float(self.problem.carried)}
 
     def restore_vector(self, name: str, values: np.ndarray) -> None:
         """Set a carried vector (owned values) from a checkpoint."""
+        if name in self._solver_state():
+            self.solver.restore(name, values)
+            return
         vec: PETSc.Vec = {"F_last": self.problem.F_last, "b": self.ops.b}[name]
         vec.array[:] = values.ravel()
 
