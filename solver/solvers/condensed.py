@@ -49,7 +49,7 @@ from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
 from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
-from solver.solvers.linear import REASONS_SNES, direct_options, set_options
+from solver.solvers.linear import REASONS_SNES, OwnOptions, direct_options
 
 MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
 POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
@@ -245,9 +245,10 @@ class Condensation:
     def __init__(self, problem: DisplacementProblem, dofs: ContactDofs, comm: MPI.Comm, linear: str) -> None:
         self.problem, self.dofs = problem, dofs
         self.ksp = PETSc.KSP().create(comm)
-        prefix = f"mech_condensed_{id(self)}_"
-        set_options(prefix, direct_options(comm, linear if linear != "auto" else "auto", True), ())
-        self.ksp.setOptionsPrefix(prefix)
+        # options of its own, removed with it: a process that builds many models (a study, a sweep from
+        # Python) would otherwise fill PETSc's options database (PETSc error 55 after some hundred)
+        self.options = OwnOptions(self, "mech_condensed_", direct_options(comm, linear, True), ())
+        self.ksp.setOptionsPrefix(self.options.prefix)
         self.ksp.setOperators(problem.ops.K)
         self.ksp.setFromOptions()
         self.u0 = problem.u.vector.duplicate()

@@ -151,3 +151,19 @@ def test_moving_levels_in_few_iterations(comm):
         assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-7, abs=1e-9)
         assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-9)
         assert a["zeta_norm"] == pytest.approx(b["zeta_norm"], rel=1e-9)
+
+
+def test_its_options_go_with_it(comm):
+    """K's factorization options are the solver's own and leave PETSc's database with it: a process building
+    many models (a study, a sweep from Python) filled the database (PETSc error 55) when they stayed."""
+    import gc
+
+    def condensed() -> set[str]:
+        return {name for name in PETSc.Options().getAll() if name.startswith("mech_condensed_")}
+
+    before = condensed()
+    model, _ = _run(comm, "newton_condensed", ["time.T=0.05"])
+    assert model.mech.solver.cond is not None and condensed() - before  # it had options while it lived
+    del model, _
+    gc.collect()
+    assert condensed() == before
