@@ -8,9 +8,9 @@ from dataclasses import dataclass
 
 from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
 
-METHODS = ("newton", "newton_energy", "newton_condensed", "penalty_duality", "fixed_point")
+METHODS = ("auto", "newton", "newton_energy", "newton_condensed", "penalty_duality", "fixed_point")
 # Newton steps on J: any dimension, any linear solver, any memory rule
-NEWTON_METHODS = ("newton", "newton_energy", "newton_condensed")
+NEWTON_METHODS = ("auto", "newton", "newton_energy", "newton_condensed")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
 LINEAR = ("auto", "petsc", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
@@ -18,13 +18,15 @@ _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature
 
 @dataclass(frozen=True)
 class SolverConfig:
-    """Solver settings: the displacement method (newton | penalty_duality | fixed_point) with its
+    """Solver settings: the displacement method (auto | newton | newton_energy | newton_condensed | penalty_duality |
+    fixed_point; auto: Newton until a level fails, newton_condensed from there, solver/solvers/auto.py) with its
     tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
     damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees.
 
     ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
     again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
-    up to newton.FALLBACK_IT_FACTOR * max_it iterations; false: such a level fails at ``max_it``.
+    up to newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
+    levels); false: such a level fails at ``max_it``.
 
     ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's
     sequential Cholesky on one process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below
@@ -34,7 +36,7 @@ class SolverConfig:
     rtol: float = 1e-10
     max_it: int = 25
     linear: str = "auto"
-    method: str = "newton"
+    method: str = "auto"
     penalty_duality_omega: float = 0.5
     damage_scheme: str = "explicit"
     quadrature_degree: int = 0  # 0: from the degrees ([discretization]); resolved when parsed

@@ -29,6 +29,7 @@ from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.memory import History
 from solver.physics.memory_source import PointStrainNorm
 from solver.physics.operators import Dirichlet, Operators, check_rigid_motions
+from solver.solvers.auto import AutoSolver
 from solver.solvers.condensed import CondensedNewtonSolver
 from solver.solvers.energy_newton import EnergyNewtonSolver
 from solver.solvers.fixed_point import FixedPointSolver, PenaltyDualitySolver
@@ -67,9 +68,10 @@ class Mechanics:
             self.solver = NewtonSolver(self.problem, settings, geo.comm)
         elif self.method == "newton_energy":
             self.solver = EnergyNewtonSolver(self.problem, settings, geo.comm)
-        elif self.method == "newton_condensed":
+        elif self.method in ("newton_condensed", "auto"):
             facets = np.concatenate([geo.facets(p.name) for p in parts])
-            self.solver = CondensedNewtonSolver(self.problem, settings, geo.comm, facets, geo.dim - 1, points)
+            kind = CondensedNewtonSolver if self.method == "newton_condensed" else AutoSolver
+            self.solver = kind(self.problem, settings, geo.comm, facets, geo.dim - 1, points)
         elif self.method == "fixed_point":
             self.solver = FixedPointSolver(self.problem, points, settings, geo.comm)
         else:
@@ -93,7 +95,9 @@ class Mechanics:
         return state() if state is not None else {}
 
     def scalars(self) -> dict[str, float]:
-        return {"c_norm": self.problem.contact_norm, "reuse": float(self.problem.carried)}
+        own = getattr(self.solver, "scalars", None)  # the method's own (auto: the level it switched at)
+        return {"c_norm": self.problem.contact_norm, "reuse": float(self.problem.carried),
+                **(own() if own is not None else {})}
 
     def restore_vector(self, name: str, values: np.ndarray) -> None:
         """Set a carried vector (owned values) from a checkpoint."""
@@ -107,6 +111,9 @@ class Mechanics:
         """Continue exactly where a checkpointed run was (the Jacobian is rebuilt at the first solve)."""
         self.problem.contact_norm = float(scalars["c_norm"])
         self.problem.carried = bool(scalars["reuse"])
+        own = getattr(self.solver, "restore_scalars", None)
+        if own is not None:
+            own({k: v for k, v in scalars.items() if k not in ("c_norm", "reuse")})
 
 
 def _point_strain_norm(ops: Operators, history: History | None, u: fem.Function) -> PointStrainNorm | None:

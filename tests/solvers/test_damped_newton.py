@@ -12,7 +12,7 @@ from solver.run.model import build_model
 
 # configs/hard.toml (a large swinging traction, mu = 1e-10) with P2 on its 16 x 16 mesh: at t = 0.45 plain
 # Newton cycles through three active sets until max_it
-CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
+CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false", "solver.method='newton'"]
 
 
 def _run(comm, extra=()):

@@ -1,0 +1,112 @@
+"""solver.method = "auto" (solver/solvers/auto.py, the default): Newton's levels while Newton solves them, then
+newton_condensed's from the first level it does not; the same solution as Newton + fallback."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from petsc4py import PETSc
+
+from solver.config import load
+from solver.io import checkpoint
+from solver.io.results import run
+from solver.run.model import build_model
+from solver.run.stepper import Stepper
+from solver.solvers.auto import AutoSolver
+
+# test_energy_newton.py's scene: hard.toml with P2, where at t = 0.45 plain Newton cycles and needs its fallback
+CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
+
+
+def _same_levels(rows, ref, comm) -> None:
+    """The same iterations and factorizations; the same results, to the bit on one rank (on 2, two builds may
+    partition differently: to round-off)."""
+    counts = ("newton_iterations", "factorizations")
+    assert [[r[k] for k in counts] for r in rows] == [[r[k] for k in counts] for r in ref]
+    for key in ("contact_force", "strain_norm", "zeta_norm"):
+        a, b = [r[key] for r in rows], [r[key] for r in ref]
+        assert a == b if comm.size == 1 else a == pytest.approx(b, rel=1e-10, abs=1e-12), key
+
+
+def _run(comm, method: str, extra=(), scene="hard.toml"):
+    model = build_model(load(ROOT / "configs" / scene, [*extra, f"solver.method='{method}'"]), comm)
+    return model, run(model, None)
+
+
+def test_it_is_the_default():
+    assert load(ROOT / "configs" / "hard.toml").solver.method == "auto"
+
+
+def test_where_newton_solves_every_level_it_is_newton(comm):
+    """Example 1: no level fails, so every level is Newton's, to the bit (iterations and results)."""
+    extra = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "output.xdmf=false"]
+    model, rows = _run(comm, "auto", extra, "example1.toml")
+    assert isinstance(model.mech.solver, AutoSolver) and not model.mech.solver.switched
+    _, ref = _run(comm, "newton", extra, "example1.toml")
+    _same_levels(rows, ref, comm)
+
+
+def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
+    """The cycling scene: the levels before t = 0.45 are Newton's to the bit; at t = 0.45 Newton fails (a cycle)
+    and the level is solved again by newton_condensed, with no damped fallback; the same solution as Newton +
+    fallback, with fewer factorizations (the level's iterations: Newton's failed attempt and newton_condensed's,
+    17 as Newton + fallback's 17 here), and K factored, not the K + C Newton leaves in K's storage."""
+    model, rows = _run(comm, "auto", CYCLING)
+    solver = model.mech.solver
+    assert solver.switched and solver.fallbacks == 0 and solver.reduced_iterations > 0
+    ref_model, ref = _run(comm, "newton", CYCLING)
+    assert ref_model.mech.solver.fallbacks >= 1
+    at = solver.switched_at
+    assert rows[at]["t"] == pytest.approx(0.45)
+    _same_levels(rows[:at], ref[:at], comm)
+    assert rows[at]["factorizations"] < ref[at]["factorizations"]  # 9 (Newton's attempt, K's) against 16
+    assert sum(r["factorizations"] for r in rows) < sum(r["factorizations"] for r in ref)
+    for a, b in zip(rows, ref, strict=True):
+        assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-8, abs=1e-10)
+        assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-8)
+        assert a["zeta_norm"] == pytest.approx(b["zeta_norm"], rel=1e-8)
+    # the Schur complement on the contact dofs is K's, as newton_condensed's own (Newton leaves K + C in K's
+    # storage; factored as it was, the condensed levels took 676 iterations on hard.toml P2 n = 16, 160 alone)
+    cond_model, _ = _run(comm, "newton_condensed", CYCLING)
+    S, S_ref = solver.cond.S, cond_model.mech.solver.cond.S
+    if comm.size == 1:
+        assert np.array_equal(S, S_ref)
+    else:  # the contact dofs in the order of each build's partition
+        assert np.sort(np.diag(S)) == pytest.approx(np.sort(np.diag(S_ref)), rel=1e-10)
+        assert np.linalg.norm(S) == pytest.approx(np.linalg.norm(S_ref), rel=1e-10)
+    problem = model.mech.problem  # the last level's residual, evaluated again from scratch
+    scale = problem.begin_level(rows[-1]["t"])
+    problem.evaluate(model.u.vector, problem.r)
+    assert problem.r.norm() <= model.cfg.solver.rtol * scale
+
+
+def test_without_a_fallback_a_failed_level_fails(comm):
+    """solver.newton_fallback = false: nothing takes a failed level over, as with Newton."""
+    from solver.errors import DisplacementSolveError
+
+    with pytest.raises(DisplacementSolveError):
+        _run(comm, "auto", [*CYCLING, "solver.newton_fallback=false"])
+
+
+def test_a_restart_goes_on_with_the_method_it_had(comm, shared_tmp):
+    """The switch is carried by checkpoints: a run restarted after it solves the next levels as newton_condensed,
+    with the same iterations and the same u (to the bit on one rank)."""
+    cfg = load(ROOT / "configs" / "hard.toml", [*CYCLING, "time.T=0.6", "solver.method='auto'"])
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(11):
+        stepper.step(n)
+    assert model.mech.solver.switched
+    checkpoint.write(shared_tmp, model, 10, 0.5, part=0)
+    fresh = build_model(cfg, comm)
+    checkpoint.read(shared_tmp, fresh)
+    assert fresh.mech.solver.switched_at == model.mech.solver.switched_at
+    again = Stepper(fresh)
+    for n in range(11, 13):
+        a, b = stepper.step(n), again.step(n)
+        assert a["newton_iterations"] == b["newton_iterations"] and a["factorizations"] == b["factorizations"] - (
+            1 if n == 11 else 0), n  # the restarted process factors K once more, at its first level
+        if comm.size == 1:
+            assert np.array_equal(fresh.u.x.array, model.u.x.array), n
+        else:  # two builds may partition differently: the norms of u
+            for kind in (PETSc.NormType.NORM_2, PETSc.NormType.NORM_INFINITY):
+                assert fresh.u.vector.norm(kind) == pytest.approx(model.u.vector.norm(kind), rel=1e-10), n
