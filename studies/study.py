@@ -109,7 +109,9 @@ def _write_csv(rows: list[dict], path: Path) -> None:
         w.writerows(rows)
 
 
-def _heatmaps(rows: list[dict], out: Path) -> list[Path]:
+def heatmaps(rows: list[dict], out: Path, prefix: str = "stability") -> list[Path]:
+    """One heat map per method of iterations per step over (k, mu), a panel per scene and n; failed cells marked
+    by their status. Written as ``{prefix}_{method}.png``."""
     plt = pyplot("the stability maps")
     if plt is None:
         return []
@@ -153,7 +155,7 @@ def _heatmaps(rows: list[dict], out: Path) -> list[Path]:
         fig.colorbar(im, ax=axes, label="iterations per step (converged)")
         fig.suptitle(f"{label}: grey = failed (D diverged, S stagnated, M too many iterations, F damage solve, "
                      f"N non-finite); red * = zeta left [zeta*, 1] before clipping", fontsize=8)
-        path = out / f"stability_{label}.png"
+        path = out / f"{prefix}_{label}.png"
         fig.savefig(path, dpi=110)
         plt.close(fig)
         made.append(path)
@@ -175,7 +177,7 @@ def stability(args) -> int:
     rows = _run_groups(_stability_group, groups, args.jobs)
     rows = _kept_rows(out / "stability.csv", rows)
     _write_csv(rows, out / "stability.csv")
-    for path in _heatmaps(rows, out):
+    for path in heatmaps(rows, out):
         print(path)
     counts: dict[str, dict[str, int]] = {}
     for r in rows:
@@ -304,7 +306,7 @@ def work_precision(args) -> int:
     titles = {"error": "methods: Table 1 norm, max over levels (reached at t = 0: spatial)",
               "error_T": "methods: the same norm at t = T"}
     for ax, key in zip(axes, ("error", "error_T")):
-        for label, marker in zip(dict.fromkeys(r["method"] for r in ok), "osD^vP"):
+        for label, marker in zip(dict.fromkeys(r["method"] for r in ok), "osD^vPX*"):
             sub = [r for r in ok if r["method"] == label]
             ax.loglog([r["seconds"] for r in sub], [r[key] for r in sub], marker, alpha=0.75, label=label)
         pf = sorted((r for r in ok if r[f"pareto_{key}"]), key=lambda r: r["seconds"])
@@ -440,8 +442,9 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--mus", type=float, nargs="+", default=MUS)
     st.add_argument("--ks", type=float, nargs="+", default=KS)
     st.add_argument("--ns", type=int, nargs="+", default=NS)
-    st.add_argument("--methods", nargs="+", default=["newton", "newton_energy", "penalty_duality", "fixed_point",
-                                                      "newton+semi_implicit_damage"], choices=list(VARIANTS))
+    st.add_argument("--methods", nargs="+", choices=list(VARIANTS),
+                    default=["newton", "newton_energy", "newton_condensed", "penalty_duality", "fixed_point",
+                             "newton+semi_implicit_damage"])
     st.add_argument("--max-it", type=int, default=200, help="iteration limit per step, for every method")
     wp.add_argument("--ks", type=float, nargs="+", default=[0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001])
     wp.add_argument("--ns", type=int, nargs="+", default=[8, 16, 32, 64])
