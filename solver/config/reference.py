@@ -72,7 +72,7 @@ MEANING: dict[str, str] = {
     "solver.rtol": "relative tolerance of the displacement iteration",
     "solver.max_it": "iteration limit of the displacement solve per level",
     "solver.linear": "linear solver (auto: chosen on the mesh, the number of ranks and, in 3-D, the number of steps)",
-    "solver.method": "displacement method for the contact nonlinearity (auto: Newton, newton_condensed from a level Newton fails)",
+    "solver.method": "displacement method for the contact nonlinearity (auto: Newton until a level takes 8, then newton_condensed)",
     "solver.penalty_duality_omega": "penalty-duality parameter: omega = value / mu",
     "solver.damage_scheme": "time scheme of the damage equation",
     "solver.quadrature_degree": "quadrature degree of the memory terms (0: from the degrees)",

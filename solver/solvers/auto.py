@@ -7,11 +7,11 @@ benchmarks/results/work_precision.csv). Where the zone moves by many points per 
 cycles between active sets and its damped fallback takes tens of iterations, each a factorization of K + C;
 newton_condensed solves those levels on the contact dofs with K's one factorization (0.07 of the time on hard.toml
 with P2 at n = 48). So a run starts with Newton, without its fallback, and at the first level Newton does not solve
-(a cycle of active sets, max_it, a failed linear solve) that level is solved again from its start by
-newton_condensed, and so is every later one. The switch depends on the iterates only, never on timings: the same
-scene takes the same path on every machine. Where newton_condensed has no energy to work on (the implicit memory
-rule) there is nothing to switch to, and the method is Newton with its fallback; with ``solver.newton_fallback =
-false`` a failed level fails, as Newton's does.
+in NEWTON_ITERATIONS (a cycle of active sets, no convergence in 8 iterations, a failed linear solve) that level is
+solved again from its start by newton_condensed, and so is every later one. The switch depends on the iterates
+only, never on timings: the same scene takes the same path on every machine. Where newton_condensed has no energy
+to work on (the implicit memory rule) there is nothing to switch to, and the method is Newton with its fallback;
+with ``solver.newton_fallback = false`` a failed level fails, as Newton's does.
 """
 
 from __future__ import annotations
@@ -28,6 +28,11 @@ from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.solvers.condensed import CondensedNewtonSolver
 from solver.solvers.newton import NewtonSolver
 
+# Newton's iterations on a level before auto hands it over (of solver.max_it): a level Newton has not solved in 8
+# is one whose active set keeps changing. hard.toml, P2, order 2, n = 48, k = 0.0125 (python scripts/nonlinear_bench.py
+# cases, one run each): 224 iterations, at most 25 on a level, with max_it (25) as the limit; 206 / 19 at 12, 202 / 15
+# at 8, 200 / 13 at 6; P1 levels of hard.toml take at most 5 (n = 16 ... 64), Example 1's 1.
+NEWTON_ITERATIONS = 8
 
 class AutoSolver(CondensedNewtonSolver):
     """Newton's levels until one fails, then :class:`CondensedNewtonSolver`'s (module docstring)."""
@@ -41,6 +46,7 @@ class AutoSolver(CondensedNewtonSolver):
         self.levels = 0
         if self.switchable:
             self.fallback.allowed = False  # a failed Newton level goes to newton_condensed instead
+            self.test.max_it = min(settings.max_it, NEWTON_ITERATIONS)
             self._start = problem.u.vector.duplicate()
 
     @property
@@ -64,6 +70,7 @@ class AutoSolver(CondensedNewtonSolver):
         self._start.copy(u.vector)  # the level again, from its start
         u.x.scatter_forward()
         self.switched_at = self.levels - 1
+        self.test.max_it = self.settings.max_it  # newton_condensed's levels have the scene's limit
         info = super().solve(scale)
         return replace(info, iterations=info.iterations + failed.iterations,
                        linear_solves=info.linear_solves + failed.iterations,
@@ -79,3 +86,5 @@ class AutoSolver(CondensedNewtonSolver):
         at = int(scalars.get("switched_at", -1))
         self.switched_at = None if at < 0 else at
         self.levels = int(scalars.get("levels", 0))
+        if self.switched:
+            self.test.max_it = self.settings.max_it
