@@ -62,6 +62,8 @@ def rel_diff(a: list[float], b: list[float]) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", type=Path, required=True, help="checkout of the baseline code")
+    ap.add_argument("--base-method", help="the baseline's solver.method (default: the checkout's default); with "
+                    "--base . a method of this tree against others")
     ap.add_argument("--pairs", type=int, default=1, help="rounds (base, then each method) of the first case")
     ap.add_argument("--pairs-rest", type=int, default=1, help="rounds of the other cases")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
@@ -77,7 +79,7 @@ def main() -> None:
             runs: dict[str, list[dict]] = {side: [] for side in sides}
             for p in range(args.pairs if i == 0 else args.pairs_rest):
                 for side in sides:  # alternated: base, m1, m2, base, m1, m2, ...
-                    src, method = (args.base, None) if side == "base" else (ROOT, side)
+                    src, method = (args.base, args.base_method) if side == "base" else (ROOT, side)
                     runs[side].append(run(src, scene, sets, method, Path(tmp) / f"{side}{i}{p}"))
             base = runs["base"][0]
             r = {**runs, "diff": {}, "time_ratio": {}}
@@ -95,7 +97,8 @@ def main() -> None:
                     x.pop(k)
     out = ROOT / "benchmarks" / "results"
     (out / f"{args.name}.json").write_text(json.dumps(results, indent=1))
-    lines = ["# Moving-contact levels: Newton (+ fallback) at the baseline against this tree's methods",
+    base = f"{args.base_method} at {args.base}" if args.base_method else "Newton (+ fallback) at the baseline"
+    lines = [f"# Moving-contact levels: {base} against this tree's methods",
              "", f"`python scripts/nonlinear_bench.py {shlex.join(sys.argv[1:])}`; "
              f"{os.cpu_count()} cores, shared. Medians of the time loop (sum of wall_time), runs alternated "
              "(base, then each method, repeated). Ratio: of the base's time loop; diff: the largest difference over "
