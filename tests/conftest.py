@@ -127,3 +127,18 @@ def run_cli(args: list[str], nproc: int = 1, timeout: float = 600, fault: str | 
     """Run the command line as a user would (from the repository root), capturing its output."""
     return subprocess.run(solver_cmd(args, nproc, fault), cwd=ROOT, env=mpi_env(), capture_output=True, text=True,
                           timeout=timeout)
+
+
+def checkpointed(cfg, comm, directory, levels: int):
+    """Levels 0 ... levels - 1 of the scene, a checkpoint of the last written to ``directory``, and a model built
+    afresh (not read yet): (the model, its stepper, the fresh model)."""
+    from solver.io import checkpoint
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
+
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(levels):
+        stepper.step(n)
+    checkpoint.write(directory, model, levels - 1, (levels - 1) * cfg.time.k, part=0)
+    return model, stepper, build_model(cfg, comm)

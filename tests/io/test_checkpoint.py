@@ -4,7 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, checkpointed
 from petsc4py import PETSc
 
 from solver.config import OutputConfig, from_dict
@@ -40,14 +40,8 @@ def test_the_written_order_is_the_keys_order(dim):
 
 
 def test_round_trip_restores_every_field(comm, shared_tmp):
-    cfg = from_dict(SCENE)
-    model = build_model(cfg, comm)
-    stepper = Stepper(model)
-    for n in range(2):
-        stepper.step(n)
-    checkpoint.write(shared_tmp, model, 1, 0.1, part=0)
+    model, _, fresh = checkpointed(from_dict(SCENE), comm, shared_tmp, 2)
     saved = {"u": model.u.x.array.copy(), "zeta": model.damage.zeta.x.array.copy(), "M": model.history.M.x.array.copy()}
-    fresh = build_model(cfg, comm)
     ck = checkpoint.read(shared_tmp, fresh)
     assert (ck.step, ck.t, ck.part) == (1, pytest.approx(0.1), 1)
     assert np.array_equal(fresh.u.x.array, saved["u"])  # same partition here: same order
@@ -74,12 +68,7 @@ def test_round_trip_carries_the_cnab2_damage_state(comm, shared_tmp):
     """The second-order damage's previous source and its 'have one' flag come back, and the next step is the
     same as the uninterrupted one's, to the bit."""
     cfg = from_dict({**SCENE, "time": {**SCENE["time"], "order": 2}})
-    model = build_model(cfg, comm)
-    stepper = Stepper(model)
-    for n in range(3):
-        stepper.step(n)
-    checkpoint.write(shared_tmp, model, 2, 0.2, part=0)
-    fresh = build_model(cfg, comm)
+    model, stepper, fresh = checkpointed(cfg, comm, shared_tmp, 3)
     assert not fresh.damage.have_prev
     checkpoint.read(shared_tmp, fresh)
     assert fresh.damage.scalars() == model.damage.scalars() == {"have_prev": 1.0}
@@ -101,13 +90,7 @@ def test_round_trip_carries_the_condensed_predictor(comm, shared_tmp):
     scene["discretization"] = {"u_degree": 2, "zeta_degree": 2}
     scene["time"]["order"] = 2
     scene["solver"] = {"method": "newton_condensed"}
-    cfg = from_dict(scene)
-    model = build_model(cfg, comm)
-    stepper = Stepper(model)
-    for n in range(34):
-        stepper.step(n)
-    checkpoint.write(shared_tmp, model, 33, 0.33, part=0)
-    fresh = build_model(cfg, comm)
+    model, stepper, fresh = checkpointed(from_dict(scene), comm, shared_tmp, 34)
     checkpoint.read(shared_tmp, fresh)
     # the same values (in the order of each build's partition)
     assert np.array_equal(np.sort(fresh.mech.solver.previous), np.sort(model.mech.solver.previous))

@@ -3,7 +3,7 @@ newton_condensed's from the first level it does not; the same solution as Newton
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, checkpointed
 from petsc4py import PETSc
 
 from solver.config import load
@@ -90,13 +90,8 @@ def test_a_restart_goes_on_with_the_method_it_had(comm, shared_tmp):
     """The switch is carried by checkpoints: a run restarted after it solves the next levels as newton_condensed,
     with the same iterations and the same u (to the bit on one rank)."""
     cfg = load(ROOT / "configs" / "hard.toml", [*CYCLING, "time.T=0.6", "solver.method='auto'"])
-    model = build_model(cfg, comm)
-    stepper = Stepper(model)
-    for n in range(11):
-        stepper.step(n)
+    model, stepper, fresh = checkpointed(cfg, comm, shared_tmp, 11)
     assert model.mech.solver.switched
-    checkpoint.write(shared_tmp, model, 10, 0.5, part=0)
-    fresh = build_model(cfg, comm)
     checkpoint.read(shared_tmp, fresh)
     assert fresh.mech.solver.switched_at == model.mech.solver.switched_at
     again = Stepper(fresh)
