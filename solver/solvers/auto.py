@@ -1,5 +1,5 @@
 """``solver.method = "auto"`` (the default): plain Newton while it solves the levels, ``newton_condensed`` from the
-first level it does not (docs/model.md §3.3).
+first level it does not (docs/model.md §4).
 
 Where the contact zone stays put, a Newton level is one solve with a reused factorization, the floor; there
 newton_condensed pays two or three solves with K per level (1.2-1.8 times Newton's time on Example 1,

@@ -1,4 +1,4 @@
-"""Newton on the contact dofs alone (``solver.method = "newton_condensed"``; docs/model.md §3.3).
+"""Newton on the contact dofs alone (``solver.method = "newton_condensed"``; docs/model.md §4).
 
 K is assembled once per run, and the contact term j(u) of a level acts only on the dofs of the contact facets
 (B, the Dirichlet ones left out: a Lagrange trace on a facet depends on the facet's dofs only). Writing c = j_B(u)
@@ -27,7 +27,7 @@ factorizations of K + C.
 In 2-D (linear and limited-penetration laws) the iteration on v runs on the contact term at its quadrature points
 (:class:`PointContact`, :class:`PointReduced`): sparse products instead of facet assemblies, an exact line search
 from the kinks of the piecewise-quadratic E, the active set looking ahead along the step after a damped one, and a
-first set predicted from the last two levels (docs/model.md §3.3).
+first set predicted from the last two levels (docs/model.md §4).
 
 Only where it applies (:func:`applies`): a contact energy (no implicit memory term), a piecewise linear law, a
 direct linear solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the method is newton_energy.

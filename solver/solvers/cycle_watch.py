@@ -1,4 +1,4 @@
-"""Cycle detection for semismooth Newton with a piecewise-linear contact law (docs/model.md §3.3).
+"""Cycle detection for semismooth Newton with a piecewise-linear contact law (docs/model.md §4).
 
 With such a law (and no implicit memory term) the residual is affine on each active set, so a Newton iterate
 depends only on the active set of the iterate before it: an active set met again, other than the last one,

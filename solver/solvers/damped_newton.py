@@ -1,5 +1,5 @@
 """Newton with an exact line search on the energy: the fallback for a level plain Newton did not solve
-(docs/model.md §3.3).
+(docs/model.md §4).
 
 Without the implicit memory term, F(u) = 0 of a level is the minimum of the convex energy
 

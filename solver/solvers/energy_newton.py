@@ -1,5 +1,5 @@
 """Semismooth Newton globalized on the level's energy from the first iteration (``solver.method =
-"newton_energy"``; docs/model.md §3.3).
+"newton_energy"``; docs/model.md §4).
 
 Where the level's F = 0 is the minimum of the convex energy (contact without the implicit memory term,
 :func:`~damped_newton.has_energy`)
