@@ -1,7 +1,7 @@
 """The fast evaluation of the memory's integrand H = zeta Phi_L(A eps(u)) and of its force on the nodes.
 
 The definition is the UFL expression :func:`solver.physics.memory.memory_source`; here it is
-evaluated as sparse products and numpy passes over the compact strain components (tested equal
+evaluated as products with the strain operator E and numpy passes over the compact strain components (tested equal
 to the definition), with the pieces that share the strain: the out-of-plane H_33 of plane strain,
 the strain norm of the diagnostics, and B M = (M, eps(w)) from the same strain operator.
 """
@@ -27,18 +27,98 @@ def _equal(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and np.array_equal(a[::stride], b[::stride]) and np.array_equal(a, b)
 
 
-class MemorySource:
-    """H = zeta Phi_L(A eps(u)) at the rule's points, as one sparse matvec and a few numpy passes.
+class StrainMap:
+    """E: u's dofs -> the d(d+1)/2 independent components of eps(u) at the rule's points (one block of ``size_q`` rows
+    per component, as :class:`MemorySource` orders them), and its transpose, from a table of the scalar basis
+    gradients per cell and point instead of a stored sparse matrix. In 3-D the sparse E held 36 entries of 12
+    bytes per P1 tetrahedron, 0.83 KB per displacement dof, the largest array of a 3-D run (issue 30); the table
+    holds 12 doubles, 0.2 KB per dof. A product costs 2.2 (E u) and 2.6 (E^T m) times the sparse one (14 and 19 ms
+    against 6.5 and 7 ms at 107,811 dofs, one of each per step), so 2-D, where E is small and the steps are short,
+    keeps the sparse matrix. The cells are taken in blocks of BLOCK (16 MB of temporaries); each component's
+    transposed sum is a bincount over the nodes (the dof index arithmetic cost as much as the sum). ``E @ u`` and
+    ``E.T @ m`` read as the matrix's did (the sums in another order: round-off)."""
 
-    eps(u) at the points is a fixed linear map of u's dofs: it is tabulated once (an
-    Expression with a trial function) into a sparse matrix ``strain_operator`` that gives the d(d+1)/2
-    independent components of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one
-    block of rows per component: 24 entries per point for P2 triangles, where the full
-    d*d tensor took 36. zeta at the points is a second, small product. A eps, the
-    truncation (skipped when no value reaches L: it is then the identity) and the factor
-    zeta act on the compact components; only the result is written out in the quadrature
-    space's d*d layout. Equal to the UFL expression ``memory_source`` (tested), which
-    remains the definition, and bit for bit equal to the full-tensor product it replaces.
+    BLOCK = 65536
+
+    def __init__(self, grad: np.ndarray, nodes: np.ndarray, bs: int, rows_q: np.ndarray, size_q: int, size_v: int,
+                 pairs: list[tuple[int, int]]) -> None:
+        # (j, cell, point, a): d_j of the element's scalar basis function a, one contiguous block per direction j
+        self._grad = np.ascontiguousarray(np.moveaxis(grad, 2, 0))
+        self.nodes = np.ascontiguousarray(nodes, dtype=np.int32)  # (cell, a): u's node of element node a
+        self.rows_q = np.ascontiguousarray(rows_q, dtype=np.int32)  # (cell, point): the quadrature node
+        self.bs, self.size_q, self.size_v, self.pairs = bs, size_q, size_v, pairs
+        self.shape = (len(pairs) * size_q, size_v)
+        self.T = _Transposed(self)
+
+    @property
+    def grad(self) -> np.ndarray:
+        """The gradient table as (cell, point, j, a) (a view)."""
+        return np.moveaxis(self._grad, 0, 2)
+
+    def _blocks(self):
+        for start in range(0, len(self.nodes), self.BLOCK):
+            yield slice(start, min(start + self.BLOCK, len(self.nodes)))
+
+    def __matmul__(self, u: np.ndarray) -> np.ndarray:
+        """The components of eps(u), flat (component-major), zero at points of no cell of the rule."""
+        bs, d = self.bs, self._grad.shape[0]
+        out = np.zeros((len(self.pairs), self.size_q))
+        columns = np.ascontiguousarray(u.reshape(-1, bs)[:, :d].T)  # (comp, node)
+        for b in self._blocks():
+            nodes = self.nodes[b]
+            uc = [np.take(columns[i], nodes) for i in range(d)]  # (cell, a) per component
+            g = [self._grad[j, b] for j in range(d)]  # (cell, point, a) per direction
+            rows = self.rows_q[b]
+            for c, (i, j) in enumerate(self.pairs):
+                e = np.einsum("cpa,ca->cp", g[j], uc[i])
+                if i != j:
+                    e += np.einsum("cpa,ca->cp", g[i], uc[j])
+                    e *= 0.5
+                out[c, rows] = e
+        return out.reshape(-1)
+
+    def transpose_product(self, m: np.ndarray) -> np.ndarray:
+        """E^T m (m: the components, flat or (component, point)), into u's local array (ghosts included)."""
+        bs, d = self.bs, self._grad.shape[0]
+        m = m.reshape(len(self.pairs), self.size_q)
+        out = np.zeros((self.size_v // bs, bs))
+        index = {pair: c for c, pair in enumerate(self.pairs)}
+        for b in self._blocks():
+            g = [self._grad[j, b] for j in range(d)]
+            rows = self.rows_q[b]
+            mb = m[:, rows.ravel()].reshape((len(self.pairs),) + rows.shape)  # (component, cell, point)
+            mb[d:] *= 0.5  # d eps / d u_(a, i) = sum_j T_ij d_j phi_a, T_ii = m_ii, T_ij = T_ji = m_ij / 2
+            nodes = self.nodes[b].ravel()
+            for i in range(d):
+                f = np.einsum("cpa,cp->ca", g[i], mb[index[(i, i)]])  # (cell, a)
+                for j in range(d):
+                    if j != i:
+                        f += np.einsum("cpa,cp->ca", g[j], mb[index[(min(i, j), max(i, j))]])
+                out[:, i] += np.bincount(nodes, f.ravel(), minlength=len(out))
+        return out.reshape(-1)
+
+
+class _Transposed:
+    """E.T, for ``E.T @ m``."""
+
+    def __init__(self, E: StrainMap) -> None:
+        self.E = E
+
+    def __matmul__(self, m: np.ndarray) -> np.ndarray:
+        return self.E.transpose_product(m)
+
+
+class MemorySource:
+    """H = zeta Phi_L(A eps(u)) at the rule's points, as one product with E and a few numpy passes.
+
+    eps(u) at the points is a fixed linear map of u's dofs: the scalar basis gradients are tabulated once (an
+    Expression with a trial function) into ``strain_operator``, E, which gives the d(d+1)/2 independent components
+    of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one block of rows per component: in 2-D a sparse
+    matrix (24 entries per point for P2 triangles, where the full d*d tensor took 36), in 3-D the table itself
+    (:class:`StrainMap`, a quarter of the matrix's memory). zeta at the points is a second, small product. A eps,
+    the truncation (skipped when no value reaches L: it is then the identity) and the factor zeta act on the
+    compact components; only the result is written out in the quadrature space's d*d layout. Equal to the UFL
+    expression ``memory_source`` (tested), which remains the definition.
 
     The strain is linear in u, so H at an extrapolated u* = 2 u - u_prev follows from the
     strains of u and u_prev (:meth:`extrapolated`): with ``keep`` > 0 the last ``keep``
@@ -80,6 +160,25 @@ class MemorySource:
         bs = V.dofmap.index_map_bs
         size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
         self.pairs = [(i, i) for i in range(d)] + [(i, j) for i in range(d) for j in range(i + 1, d)]
+        if d == 3:  # the table, not the matrix (StrainMap: 0.2 KB per dof instead of 0.83)
+            self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
+        else:
+            self.strain_operator = self._sparse(grad, nodes, bs, rows_q, size_q, size_v)
+        self._a = np.empty((len(self.pairs), size_q))  # A eps
+        self._extrapolated: np.ndarray | None = None  # eps(u*), made at the first extrapolation (order 2 only)
+        self._trace = np.empty(size_q)
+        self.Zq = None
+        if isinstance(zeta, fem.Function):
+            Z = zeta.function_space
+            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
+            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
+            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
+            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
+            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+
+    def _sparse(self, grad: np.ndarray, nodes: np.ndarray, bs: int, rows_q: np.ndarray, size_q: int,
+                size_v: int) -> sp.csr_matrix:
+        """E as a sparse matrix (2-D): the strain components' rows, u's blocked array indices as columns."""
         rows, cols, vals = [], [], []
         for c, (i, j) in enumerate(self.pairs):
             r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
@@ -92,19 +191,8 @@ class MemorySource:
                 cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
                 vals.append(v.ravel())
         # rows sorted by column, as the full tensor's were (tocsr sorts them)
-        self.strain_operator = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                               shape=(len(self.pairs) * size_q, size_v)).tocsr()
-        self._a = np.empty((len(self.pairs), size_q))  # A eps
-        self._extrapolated: np.ndarray | None = None  # eps(u*), made at the first extrapolation (order 2 only)
-        self._trace = np.empty(size_q)
-        self.Zq = None
-        if isinstance(zeta, fem.Function):
-            Z = zeta.function_space
-            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
-            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
-            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
-            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
-            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(len(self.pairs) * size_q, size_v)).tocsr()
 
     def retain(self, count: int) -> None:
         """Keep at least the last ``count`` strains of the field's own values: a consumer that reads a committed
@@ -216,7 +304,7 @@ def point_weights(rule: QuadratureRule, source: MemorySource) -> np.ndarray:
 
 
 class MemoryForce:
-    """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one sparse product.
+    """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one product with E^T.
 
     Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
     P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
@@ -226,10 +314,10 @@ class MemoryForce:
     m holds M's diagonal components and the sums of its off-diagonal pairs (M need not be
     symmetric), and E is the source's strain operator of the independent components
     (:class:`MemorySource`), applied transposed: 24 entries per P2 point, where the full-tensor operator
-    has 36 and the assembled B 48. W m is formed in m's own buffer and E^T (W m) is scipy's product with
-    the transposed view of E (a CSC view of the same arrays: no second operator is stored; holding
-    E^T W apart cost 0.38 KB per 3-D dof, issue 30). The product runs on the local arrays, followed by
-    one reverse scatter. Equal to B M to round-off (tested).
+    has 36 and the assembled B 48. W m is formed in m's own buffer and E^T (W m) is, in 2-D, scipy's product
+    with the transposed view of E (a CSC view of the same arrays: no second operator is stored; holding
+    E^T W apart cost 0.38 KB per 3-D dof, issue 30), in 3-D :class:`StrainMap`'s transposed product. It runs on
+    the local arrays, followed by one reverse scatter. Equal to B M to round-off (tested).
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
