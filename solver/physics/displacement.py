@@ -148,6 +148,14 @@ class DisplacementProblem:
         fpetsc.set_bc(F, self.bcs, x, -1.0)
         F.copy(self.F_last)
 
+    def stiffness(self) -> PETSc.Mat:
+        """K itself, for a method that factors it: where J = K + C lives in K's storage and a Jacobian was
+        assembled there, K's rows are put back (StiffnessRows) and the next Jacobian is assembled anew."""
+        if self.kept is not None and self.contact.fingerprint():
+            self.kept.restore(self.J)
+            self.contact.forget()
+        return self.ops.K
+
     def update_jacobian(self, x: PETSc.Vec) -> bool:
         """Bring J to the Jacobian at x; True if J was modified (a direct solver then refactors)."""
         if self.Fm is not None:  # J = K (+ C) + dF_m/du, rebuilt at every call (it depends on zeta_n)

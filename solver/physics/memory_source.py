@@ -98,6 +98,26 @@ class StrainMap:
         return out.reshape(-1)
 
 
+def sparse_strain_operator(grad: np.ndarray, nodes: np.ndarray, bs: int, rows_q: np.ndarray, size_q: int,
+                           size_v: int, pairs: list[tuple[int, int]]) -> sp.csr_matrix:
+    """E as a sparse matrix (2-D; :class:`StrainMap`'s arguments): the strain components' rows, u's blocked array
+    indices as columns."""
+    rows, cols, vals = [], [], []
+    for c, (i, j) in enumerate(pairs):
+        r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
+        # 1/2 d_j u_i + 1/2 d_i u_j; for i == j the two halves are one entry d_i u_i (0.5 g + 0.5 g == g
+        # exactly), so that the COO holds no duplicates: scipy's tocsr sums duplicates in place and keeps
+        # the whole unsummed buffer alive behind its slice (a third more memory for E)
+        for comp, gdir, half in (((i, i, 1.0),) if i == j else ((i, j, 0.5), (j, i, 0.5))):
+            v = half * grad[:, :, gdir, :]  # (cell, point, a)
+            rows.append(np.broadcast_to(r, v.shape).ravel())
+            cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
+            vals.append(v.ravel())
+    # rows sorted by column, as the full tensor's were (tocsr sorts them)
+    return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(len(pairs) * size_q, size_v)).tocsr()
+
+
 class _Transposed:
     """E.T, for ``E.T @ m``."""
 
@@ -163,7 +183,7 @@ class MemorySource:
         if d == 3:  # the table, not the matrix (StrainMap: 0.2 KB per dof instead of 0.83)
             self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
         else:
-            self.strain_operator = self._sparse(grad, nodes, bs, rows_q, size_q, size_v)
+            self.strain_operator = sparse_strain_operator(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
         self._a = np.empty((len(self.pairs), size_q))  # A eps
         self._extrapolated: np.ndarray | None = None  # eps(u*), made at the first extrapolation (order 2 only)
         self._trace = np.empty(size_q)
@@ -175,24 +195,6 @@ class MemorySource:
             c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
             nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
             self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
-
-    def _sparse(self, grad: np.ndarray, nodes: np.ndarray, bs: int, rows_q: np.ndarray, size_q: int,
-                size_v: int) -> sp.csr_matrix:
-        """E as a sparse matrix (2-D): the strain components' rows, u's blocked array indices as columns."""
-        rows, cols, vals = [], [], []
-        for c, (i, j) in enumerate(self.pairs):
-            r = (c * size_q + rows_q)[:, :, None]  # (cell, point, 1)
-            # 1/2 d_j u_i + 1/2 d_i u_j; for i == j the two halves are one entry d_i u_i (0.5 g + 0.5 g == g
-            # exactly), so that the COO holds no duplicates: scipy's tocsr sums duplicates in place and keeps
-            # the whole unsummed buffer alive behind its slice (a third more memory for E in 3-D)
-            for comp, gdir, half in (((i, i, 1.0),) if i == j else ((i, j, 0.5), (j, i, 0.5))):
-                v = half * grad[:, :, gdir, :]  # (cell, point, a)
-                rows.append(np.broadcast_to(r, v.shape).ravel())
-                cols.append(np.broadcast_to((nodes * bs + comp)[:, None, :], v.shape).ravel())
-                vals.append(v.ravel())
-        # rows sorted by column, as the full tensor's were (tocsr sorts them)
-        return sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(len(self.pairs) * size_q, size_v)).tocsr()
 
     def retain(self, count: int) -> None:
         """Keep at least the last ``count`` strains of the field's own values: a consumer that reads a committed

@@ -34,6 +34,7 @@ from solver.solvers.newton import NewtonSolver
 # at 8, 200 / 13 at 6; P1 levels of hard.toml take at most 5 (n = 16 ... 64), Example 1's 1.
 NEWTON_ITERATIONS = 8
 
+
 class AutoSolver(CondensedNewtonSolver):
     """Newton's levels until one fails, then :class:`CondensedNewtonSolver`'s (module docstring)."""
 
@@ -69,12 +70,16 @@ class AutoSolver(CondensedNewtonSolver):
             failed = exc
         self._start.copy(u.vector)  # the level again, from its start
         u.x.scatter_forward()
-        self.switched_at = self.levels - 1
-        self.test.max_it = self.settings.max_it  # newton_condensed's levels have the scene's limit
+        self._switch(self.levels - 1)
         info = super().solve(scale)
         return replace(info, iterations=info.iterations + failed.iterations,
                        linear_solves=info.linear_solves + failed.iterations,
                        factorizations=self.factorizations - f0)
+
+    def _switch(self, level: int) -> None:
+        """From ``level`` on, newton_condensed's levels, with the scene's iteration limit."""
+        self.switched_at = level
+        self.test.max_it = self.settings.max_it
 
     def scalars(self) -> dict[str, float]:
         """What a checkpoint carries of the switch: the level it was made at (-1: not yet)."""
@@ -84,7 +89,6 @@ class AutoSolver(CondensedNewtonSolver):
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         """Take back :meth:`scalars`: a restarted run goes on with the method the checkpointed one had."""
         at = int(scalars.get("switched_at", -1))
-        self.switched_at = None if at < 0 else at
         self.levels = int(scalars.get("levels", 0))
-        if self.switched:
-            self.test.max_it = self.settings.max_it
+        if at >= 0:
+            self._switch(at)

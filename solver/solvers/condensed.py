@@ -249,15 +249,10 @@ class Condensation:
         # Python) would otherwise fill PETSc's options database (PETSc error 55 after some hundred)
         self.options = OwnOptions(self, "mech_condensed_", direct_options(comm, linear, True), ())
         self.ksp.setOptionsPrefix(self.options.prefix)
-        if problem.kept is not None and problem.J is problem.ops.K and problem.contact.fingerprint():
-            # J = K + C lives in K's storage (StiffnessRows): after Newton steps (auto's first levels) K's rows
-            # are put back before K is factored, and the next Jacobian is assembled anew
-            problem.kept.restore(problem.J)
-            problem.contact.forget()
-        self.ksp.setOperators(problem.ops.K)
+        self.ksp.setOperators(problem.stiffness())  # K, also after Newton steps wrote K + C into its storage (auto)
+        self.ksp.setFromOptions()
         # K's factorization stays K's when a later full Newton iteration (newton_energy's, where the steps through
         # K do not settle a level) adds C into the same storage: PETSc would otherwise refactor it at the next solve
-        self.ksp.setFromOptions()
         self.ksp.getPC().setReusePreconditioner(True)
         self.u0 = problem.u.vector.duplicate()
         self._e = problem.u.vector.duplicate()

@@ -17,7 +17,6 @@ from __future__ import annotations
 import numpy as np
 import ufl
 from dolfinx import fem
-from petsc4py import PETSc
 
 from solver.config import BodyForceConfig, BoundaryConfig, MaterialConfig, SolverConfig
 from solver.errors import DisplacementSolveError
@@ -101,11 +100,11 @@ class Mechanics:
 
     def restore_vector(self, name: str, values: np.ndarray) -> None:
         """Set a carried vector (owned values) from a checkpoint."""
-        if name in self._solver_state():
+        own = {"F_last": self.problem.F_last, "b": self.ops.b}
+        if name in own:
+            own[name].array[:] = values.ravel()
+        else:  # the method's own (state() named it)
             self.solver.restore(name, values)
-            return
-        vec: PETSc.Vec = {"F_last": self.problem.F_last, "b": self.ops.b}[name]
-        vec.array[:] = values.ravel()
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         """Continue exactly where a checkpointed run was (the Jacobian is rebuilt at the first solve)."""
