@@ -176,8 +176,10 @@ class Operators:
         # B M = (M, eps(w)) from the source's strain operator (tested equal to the assembled coupling)
         self._memory_force = MemoryForce(history.rule, history.H) if history is not None else None
 
-        self.bulk = ufl.inner(elasticity(strain(self.du), material.E, material.nu, material.model),
-                              strain(self.w)) * ufl.dx
+        # sigma(du) : eps(w), the bulk integrand (Reactions integrates it over the cells at the Dirichlet dofs alone)
+        self.stress_work = ufl.inner(elasticity(strain(self.du), material.E, material.nu, material.model),
+                                     strain(self.w))
+        self.bulk = self.stress_work * ufl.dx
         pattern = self.bulk if pattern_extra is None else self.bulk + pattern_extra
         self.bulk_form = fem.form(self.bulk)
         self.K = fpetsc.create_matrix(fem.form(pattern))

@@ -66,3 +66,39 @@ def test_contact_traces_factor_only_the_contact_boundary(comm):
     traces.update_pressure()
     force = comm.allreduce(fem.assemble_scalar(fem.form(traces.pressure * model.geo.ds(model.geo.tags["bottom"]))))
     assert force == pytest.approx(row["contact_force"], rel=1e-9) and row["contact_force"] > 0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_reactions_assemble_only_the_dirichlet_rows(comm, dim):
+    """K_full's Dirichlet rows come from the cells at the Dirichlet dofs alone (issue 30, memory): they equal the
+    rows of the whole K assembled without conditions (serial and across ranks), and the matrix Reactions assembles
+    holds a small part of K's nonzeros (the whole K was assembled before)."""
+    from dolfinx.fem import petsc as fpetsc
+    from petsc4py import PETSc
+
+    from solver.config import load
+    from solver.physics import diagnostics
+    from studies import REPO
+
+    if dim == 2:
+        cfg = from_dict({"mesh": {"nx": 24, "ny": 24}, "time": {"T": 0.1, "k": 0.1}})
+    else:
+        cfg = load(REPO / "configs" / "example1_3d.toml", ["mesh.nx=8", "mesh.ny=8", "mesh.nz=8", "time.T=0.02",
+                                                           "output.xdmf=false"])
+    model = build_model(cfg, comm)
+    reactions = model.mech.diagnostics.reactions
+    ops = model.mech.problem.ops
+    constrained = ops.dirichlet.constrained
+    assert comm.allreduce(len(constrained), op=MPI.SUM) > 0
+    part = fpetsc.assemble_matrix(diagnostics.dirichlet_rows_form(ops, constrained))
+    part.assemble()
+    whole = fpetsc.assemble_matrix(ops.bulk_form)
+    whole.assemble()
+    assert part.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"] < 0.2 * whole.getInfo(
+        PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
+    start, end = whole.getOwnershipRange()
+    for j, dof in enumerate(constrained + start):
+        cols, want = whole.getRow(int(dof))
+        got_cols, got = reactions.K.getRow(reactions.K.getOwnershipRange()[0] + j)
+        kept = got != 0.0
+        assert np.array_equal(got_cols[kept], cols[want != 0.0]) and np.array_equal(got[kept], want[want != 0.0])
