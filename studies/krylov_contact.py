@@ -9,6 +9,11 @@ the stiff contact block is what costs them. ``--nullspace rigid contact`` runs e
 near-nullspace of the AMG: the plain rigid motions, or the rigid motions without their normal component on Gamma_C
 (the solver's default, linear.rigid_body_modes), alternating, and reports the iterations and the displacement
 solve's time per step of both. Written to ``krylov_contact.md`` with ``--output``.
+
+``--amg ml gamg-sa`` runs each case (contact near-nullspace) with the solver's AMG, Trilinos ML, and with GAMG's
+smoothed aggregation, the AMG of the plain elasticity solve (studies/anchor.py), whose hierarchy is the lighter:
+whether the cheaper AMG could carry the contact term. Reported with each run's peak memory; written to
+``krylov_contact_amg.md``.
 """
 
 from __future__ import annotations
@@ -24,11 +29,18 @@ from pathlib import Path
 from studies import REPO as ROOT
 
 NULLSPACES = ("rigid", "contact")
+# the AMGs --amg compares: the solver's default, and GAMG's smoothed aggregation (PETSc's GAMG default, as in the
+# plain solve); its Chebyshev bounds from its own CG estimate on each level: with the bounds of the smoothed
+# aggregation's estimate (the default) the preconditioner turned indefinite at mu = 1e-10 (benchmarks/results/amg_3d.md)
+AMGS = {"ml": {}, "gamg-sa": {"mech_pc_type": "gamg", "mech_pc_gamg_agg_nsmooths": "1",
+                              "mech_pc_gamg_use_sa_esteig": "false"}}
 
 
-def run_case(n: int, mu: float, nullspace: str = "contact") -> dict:
+def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "ml") -> dict:
     """One case in this process: Krylov iterations per solve at level 0 and over the steps, the displacement
-    solve's time per step (median), the contact force."""
+    solve's time per step (median), the contact force, the process's peak memory."""
+    import resource
+
     from mpi4py import MPI
 
     from solver.config import load
@@ -40,21 +52,23 @@ def run_case(n: int, mu: float, nullspace: str = "contact") -> dict:
 
     cfg = load(ROOT / "configs" / "example1_3d.toml",
                [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.1", "output.xdmf=false",
-                "solver.linear='iterative'", f"boundary.bottom.mu={mu!r}"])
+                "solver.linear='iterative'", f"boundary.bottom.mu={mu!r}"]
+               + [f"solver.petsc_options.{k}='{v}'" for k, v in AMGS[amg].items()])
     rows = run(build_model(cfg, MPI.COMM_WORLD), None)
     steps = rows[1:]
-    return {"n": n, "mu": mu, "nullspace": nullspace, "dofs": 3 * (n + 1) ** 3,
+    return {"n": n, "mu": mu, "nullspace": nullspace, "amg": amg, "dofs": 3 * (n + 1) ** 3,
+            "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "step_s": statistics.median(r["time_displacement"] for r in steps),
             "level0": rows[0]["krylov_iterations"] / rows[0]["linear_solves"],
             "steps": sum(r["krylov_iterations"] for r in steps) / sum(r["linear_solves"] for r in steps),
             "contact_force": rows[-1]["contact_force"]}
 
 
-def run_case_apart(n: int, mu: float, nullspace: str = "contact") -> dict:
+def run_case_apart(n: int, mu: float, nullspace: str = "contact", amg: str = "ml") -> dict:
     """:func:`run_case` in a process of its own. Each case then starts from a fresh PETSc; and Debian's PETSc 3.18 with
     Trilinos ML (the iterative path's AMG) was seen to crash (SIGSEGV in the SNES solve) at the ninth 3-D iterative
     model built in one process, also at 0af5863 (GAMG does not); not root-caused."""
-    res = subprocess.run([sys.executable, "-m", "studies.krylov_contact", "case", str(n), repr(mu), nullspace],
+    res = subprocess.run([sys.executable, "-m", "studies.krylov_contact", "case", str(n), repr(mu), nullspace, amg],
                          capture_output=True, text=True, cwd=ROOT, env=dict(os.environ), check=True)
     return json.loads(res.stdout.strip().splitlines()[-1])
 
@@ -82,11 +96,37 @@ def table(cases: list[dict], repeat: int = 1) -> str:
     return "\n".join(lines) + "\n"
 
 
+def amg_table(cases: list[dict]) -> str:
+    """The --amg comparison: iterations, step time and peak memory of each AMG against ML's, per case."""
+    sizes = " ".join(str(n) for n in sorted({c["n"] for c in cases}))
+    mus = " ".join(repr(m) for m in sorted({c["mu"] for c in cases}))
+    amgs = " ".join(dict.fromkeys(c["amg"] for c in cases))
+    lines = ["# Krylov iterations against the contact stiffness, by AMG (3-D Example 1, iterative, one process)", "",
+             f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --amg {amgs} --output "
+             "benchmarks/results`. Level 0 and 5 steps of k = 0.02, the contact near-nullspace. `ml`: the solver's "
+             "AMG (Trilinos ML, smoothed aggregation); `gamg-sa`: PETSc GAMG's smoothed aggregation, the AMG of the "
+             "plain elasticity solve (17-19 iterations, scaling.md), with its Chebyshev bounds from its own CG "
+             "estimate. The runs of a case ran one after the other on a shared 2-core machine; step time and "
+             "peak memory (the process's) are read as ratios to ML's run of the same case.", "",
+             "| n | dofs | mu | AMG | Krylov its / solve, level 0 | steps | step time / ml's | peak MiB | "
+             "peak / ml's | contact force at T |", "|---|---|---|---|---|---|---|---|---|---|"]
+    ml = {(c["n"], c["mu"]): c for c in cases if c["amg"] == "ml"}
+    for c in sorted(cases, key=lambda c: (c["n"], c["mu"], list(AMGS).index(c["amg"]))):
+        ref = ml.get((c["n"], c["mu"]))
+        step = f"{c['step_s'] / ref['step_s']:.2f}" if ref else "-"
+        peak = f"{c['peak_mib'] / ref['peak_mib']:.2f}" if ref else "-"
+        lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {c['amg']} | {c['level0']:.1f} | {c['steps']:.1f} | "
+                     f"{step} | {c['peak_mib']:,.0f} | {peak} | {c['contact_force']:.6g} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m studies.krylov_contact", description=__doc__.splitlines()[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[14, 22])
     p.add_argument("--mu", type=float, nargs="+", default=[1e-10, 1e-6, 1e-3])
     p.add_argument("--nullspace", nargs="+", choices=NULLSPACES, default=list(NULLSPACES))
+    p.add_argument("--amg", nargs="+", choices=list(AMGS), default=None,
+                   help="compare these AMGs (contact near-nullspace) instead of the near-nullspaces")
     p.add_argument("--repeat", type=int, default=1, help="runs of each case, alternating (step time: their median)")
     p.add_argument("--output", default=None)
     a = p.parse_args(argv)
@@ -95,6 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"error: {bad[0][0]}: {bad[0][1]}", file=sys.stderr)
         return 2
+    if a.amg:
+        return _compare_amgs(a)
     cases = []
     for n in a.sizes:
         for mu in a.mu:
@@ -112,8 +154,27 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _compare_amgs(a: argparse.Namespace) -> int:
+    cases = []
+    for n in a.sizes:
+        for mu in a.mu:
+            runs: dict[str, list[dict]] = {amg: [] for amg in a.amg}
+            for _ in range(a.repeat):
+                for amg in a.amg:
+                    runs[amg].append(run_case_apart(n, mu, "contact", amg))
+                    print(json.dumps(runs[amg][-1]), flush=True)
+            for rs in runs.values():
+                cases.append({**rs[0], "step_s": statistics.median(r["step_s"] for r in rs),
+                              "peak_mib": max(r["peak_mib"] for r in rs)})
+    text = amg_table(cases)
+    print(text)
+    if a.output:
+        Path(a.output, "krylov_contact_amg.md").write_text(text)
+    return 0
+
+
 if __name__ == "__main__":
-    if len(sys.argv) == 5 and sys.argv[1] == "case":
-        print(json.dumps(run_case(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4])))
+    if len(sys.argv) == 6 and sys.argv[1] == "case":
+        print(json.dumps(run_case(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4], sys.argv[5])))
         raise SystemExit(0)
     raise SystemExit(main())

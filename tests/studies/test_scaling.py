@@ -21,6 +21,24 @@ def test_a_case_reports_its_figures_on_every_rank(comm):
     assert direct["contact_force"] == pytest.approx(case["contact_force"], rel=1e-9)
 
 
+def test_the_default_run_covers_one_cycle_of_the_initial_guess_at_every_size(monkeypatch):
+    """10 steps, the solutions Fischer's projection keeps (linear.GUESS), at small and large sizes alike; the step is
+    the mean of the run's steps, which differ by design (the first ones, before any projection, are the dearest)."""
+    from solver.solvers import linear
+
+    assert linear.GUESS["ksp_guess_fischer_model"] == "1,10"
+    assert scaling.default_steps(14) == scaling.default_steps(68) == 10
+    monkeypatch.setitem(linear.GUESS, "ksp_guess_fischer_model", "1,7")
+    assert scaling.default_steps(46) == 7
+    walls = [4.0, 1.0, 2.0, 3.0, 0.5]  # level 0, then the steps: mean 1.625, median 1.5
+    rows = [{"wall_time": w, "newton_iterations": 1, "linear_solves": 1, "krylov_iterations": 1, "factorizations": 1,
+             "damage_krylov_iterations": 1, "contact_force": 1.0, **{f"time_{p}": w for p in scaling.PHASES}}
+            for w in walls]
+    monkeypatch.setattr("solver.io.results.run", lambda model, out: rows)
+    case = scaling.run_case(2, "iterative", 4)
+    assert case["step_s"] == pytest.approx(1.625) and case["split_ms"]["damage"] == pytest.approx(1625.0)
+
+
 def _case(solver, nproc, n, **kw):
     c = {"n": n, "solver": solver, "nproc": nproc, "steps": 3, "dofs": scaling.dofs_of(n), "status": "ok",
          "setup_s": 1.0, "level0_s": 10.0, "step_s": 0.1, "peak_mib_sum": 100.0 * nproc + 1000.0, "peak_mib_max": 1100.0}
