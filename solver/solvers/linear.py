@@ -34,9 +34,9 @@ from solver.errors import ConfigError
 # active set moves pays a factorization (MUMPS) or a set-up (iterative) at each change: the steps then weigh less
 # and the rule counts only level 0's two. Before issue 30, measured on netlib's reference BLAS
 # (benchmarks/results/auto_3d/scaling.md), the iterative path was taken from 10,000 dofs for every run.
-# Checked on the later scaling run (scaling.md, 2026-11-26; docs/benchmarks/performance.md): MUMPS is faster from
-# 2 / 16 / 44 / 88 steps at 10,125 / 36,501 / 107,811 / 311,469 dofs, for 1.2 / 1.6 / 2.7 / 3.6x the iterative
-# path's peak memory: at 107,811 a 50-step run is a near tie (MUMPS 6 % faster) for 2.7x the memory.
+# Checked on the later scaling run (scaling.md, 2026-11-26 09:03; docs/benchmarks/performance.md): MUMPS is faster
+# from the first step / 12 / 59 / 194 steps at 10,125 / 36,501 / 107,811 / 311,469 dofs, for 1.2 / 1.6 / 2.6 / 3.6x
+# the iterative path's peak memory.
 AUTO_ITERATIVE_DOFS_3D = 60_000
 AUTO_SHORT_RUN_DOFS_3D = 10_000
 AUTO_DIRECT_MIN_STEPS_3D = 10
