@@ -1,7 +1,7 @@
 """Krylov iterations of the 3-D displacement solve against the stiffness of the contact term.
 
 ``python -m studies.krylov_contact --sizes 14 22 --mu 1e-10 1e-6 1e-3`` runs 3-D Example 1 (iterative solver,
-level 0 and 3 steps of k = 0.02, nothing written) with the normal compliance mu of Gamma_C set to each value
+level 0 and 10 steps of k = 0.02, nothing written) with the normal compliance mu of Gamma_C set to each value
 (the scene's is 1e-10: a contact stiffness 1/mu = 1e10 against E = 100), each case in its own process, and
 reports the Krylov iterations per linear solve. The plain elasticity solve of the same cube (no contact,
 studies/anchor.py) takes 17-19 CG iterations at these sizes; if the iterations fall toward it as mu grows,
@@ -10,10 +10,10 @@ near-nullspace of the AMG: the plain rigid motions, or the rigid motions without
 (the solver's default, linear.rigid_body_modes), alternating, and reports the iterations and the displacement
 solve's time per step of both. Written to ``krylov_contact.md`` with ``--output``.
 
-``--amg ml gamg-sa`` runs each case (contact near-nullspace) with the solver's AMG, Trilinos ML, and with GAMG's
-smoothed aggregation, the AMG of the plain elasticity solve (studies/anchor.py), whose hierarchy is the lighter:
-whether the cheaper AMG could carry the contact term. Reported with each run's peak memory; written to
-``krylov_contact_amg.md``.
+``--amg gamg ml gamg-reuse`` runs each case (contact near-nullspace) with the solver's AMG (GAMG's smoothed
+aggregation, set up anew when J changes), with Trilinos ML, and with GAMG keeping the interpolation of its first
+set-up (PETSc's default, K's before the contact term): iterations, time per step and peak memory as ratios to the
+solver's AMG, written to ``krylov_contact_amg.md``.
 """
 
 from __future__ import annotations
@@ -29,16 +29,13 @@ from pathlib import Path
 from studies import REPO as ROOT
 
 NULLSPACES = ("rigid", "contact")
-# the AMGs --amg compares: the solver's default, and GAMG's smoothed aggregation (PETSc's GAMG default, as in the
-# plain solve); its Chebyshev bounds from its own CG estimate on each level: with the bounds of the smoothed
-# aggregation's estimate (the default) the preconditioner turned indefinite at mu = 1e-10 (benchmarks/results/amg_3d.md)
-AMGS = {"ml": {}, "gamg-sa": {"mech_pc_type": "gamg", "mech_pc_gamg_agg_nsmooths": "1",
-                              "mech_pc_gamg_use_sa_esteig": "false"}}
+# the AMGs --amg compares, as scene options on top of the solver's defaults (linear.AMG)
+AMGS = {"gamg": {}, "ml": {"mech_pc_type": "ml"}, "gamg-reuse": {"mech_pc_gamg_reuse_interpolation": "true"}}
 
 
-def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "ml") -> dict:
+def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -> dict:
     """One case in this process: Krylov iterations per solve at level 0 and over the steps, the displacement
-    solve's time per step (median), the contact force, the process's peak memory."""
+    solve's time per step (mean), the contact force, the process's peak memory."""
     import resource
 
     from mpi4py import MPI
@@ -51,20 +48,20 @@ def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "ml") -> 
     newton.CONTACT_NEAR_NULLSPACE = nullspace == "contact"
 
     cfg = load(ROOT / "configs" / "example1_3d.toml",
-               [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.1", "output.xdmf=false",
+               [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.2", "output.xdmf=false",
                 "solver.linear='iterative'", f"boundary.bottom.mu={mu!r}"]
                + [f"solver.petsc_options.{k}='{v}'" for k, v in AMGS[amg].items()])
     rows = run(build_model(cfg, MPI.COMM_WORLD), None)
     steps = rows[1:]
     return {"n": n, "mu": mu, "nullspace": nullspace, "amg": amg, "dofs": 3 * (n + 1) ** 3,
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
-            "step_s": statistics.median(r["time_displacement"] for r in steps),
+            "step_s": statistics.mean(r["time_displacement"] for r in steps),  # 10 steps: one cycle of Fischer's guess
             "level0": rows[0]["krylov_iterations"] / rows[0]["linear_solves"],
             "steps": sum(r["krylov_iterations"] for r in steps) / sum(r["linear_solves"] for r in steps),
             "contact_force": rows[-1]["contact_force"]}
 
 
-def run_case_apart(n: int, mu: float, nullspace: str = "contact", amg: str = "ml") -> dict:
+def run_case_apart(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -> dict:
     """:func:`run_case` in a process of its own. Each case then starts from a fresh PETSc; and Debian's PETSc 3.18 with
     Trilinos ML (the iterative path's AMG) was seen to crash (SIGSEGV in the SNES solve) at the ninth 3-D iterative
     model built in one process, also at 0af5863 (GAMG does not); not root-caused."""
@@ -79,11 +76,12 @@ def table(cases: list[dict], repeat: int = 1) -> str:
     spaces = " ".join(dict.fromkeys(c["nullspace"] for c in cases))
     lines = ["# Krylov iterations against the contact stiffness (3-D Example 1, iterative, one process)", "",
              f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --nullspace {spaces} --repeat {repeat} "
-             "--output benchmarks/results`. Level 0 and 5 steps of k = 0.02. The scene's mu is 1e-10; the plain "
+             "--output benchmarks/results`. Level 0 and 10 steps of k = 0.02 (one cycle of Fischer's guess). "
+             "The scene's mu is 1e-10; the plain "
              "elasticity solve (no contact) takes 17-19 iterations (scaling.md). Near-nullspace `rigid`: the six rigid "
              "motions; `contact`: the same without their normal component on Gamma_C (the default). The two of a "
              f"case ran one after the other, alternating, {repeat} time(s) each, on a shared 2-core machine; the step "
-             "time is the median displacement solve of the 5 steps (and of the repeats), its ratio taken within the "
+             "time is the mean displacement solve of the 10 steps (the median over the repeats), its ratio taken within the "
              "pair. Absolute times are not comparable between rows.", "",
              "| n | dofs | mu | near-nullspace | Krylov its / solve, level 0 | steps | step time / rigid's "
              "| contact force at T |", "|---|---|---|---|---|---|---|---|"]
@@ -97,24 +95,25 @@ def table(cases: list[dict], repeat: int = 1) -> str:
 
 
 def amg_table(cases: list[dict]) -> str:
-    """The --amg comparison: iterations, step time and peak memory of each AMG against ML's, per case."""
+    """The --amg comparison: iterations, step time and peak memory of each AMG against the solver's, per case."""
     sizes = " ".join(str(n) for n in sorted({c["n"] for c in cases}))
     mus = " ".join(repr(m) for m in sorted({c["mu"] for c in cases}))
     amgs = " ".join(dict.fromkeys(c["amg"] for c in cases))
     lines = ["# Krylov iterations against the contact stiffness, by AMG (3-D Example 1, iterative, one process)", "",
              f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --amg {amgs} --output "
-             "benchmarks/results`. Level 0 and 5 steps of k = 0.02, the contact near-nullspace. `ml`: the solver's "
-             "AMG (Trilinos ML, smoothed aggregation); `gamg-sa`: PETSc GAMG's smoothed aggregation, the AMG of the "
-             "plain elasticity solve (17-19 iterations, scaling.md), with its Chebyshev bounds from its own CG "
-             "estimate. The runs of a case ran one after the other on a shared 2-core machine; step time and "
-             "peak memory (the process's) are read as ratios to ML's run of the same case.", "",
-             "| n | dofs | mu | AMG | Krylov its / solve, level 0 | steps | step time / ml's | peak MiB | "
-             "peak / ml's | contact force at T |", "|---|---|---|---|---|---|---|---|---|---|"]
-    ml = {(c["n"], c["mu"]): c for c in cases if c["amg"] == "ml"}
+             "benchmarks/results`. Level 0 and 10 steps of k = 0.02, the contact near-nullspace. `gamg`: the solver's "
+             "AMG, GAMG's smoothed aggregation set up anew when J changes; `ml`: Trilinos ML (smoothed aggregation, "
+             "MIS), the solver's AMG before; `gamg-reuse`: GAMG keeping the interpolation of its first set-up "
+             "(PETSc's default: K's, before the contact term). The runs of a case ran one after the other on a shared "
+             "2-core machine; step time (the mean displacement solve of the steps) and peak memory (the process's) "
+             "are read as ratios to `gamg`'s run of the same case.", "",
+             "| n | dofs | mu | AMG | Krylov its / solve, level 0 | steps | step time / gamg's | peak MiB | "
+             "peak / gamg's | contact force at T |", "|---|---|---|---|---|---|---|---|---|---|"]
+    ref = {(c["n"], c["mu"]): c for c in cases if c["amg"] == "gamg"}
     for c in sorted(cases, key=lambda c: (c["n"], c["mu"], list(AMGS).index(c["amg"]))):
-        ref = ml.get((c["n"], c["mu"]))
-        step = f"{c['step_s'] / ref['step_s']:.2f}" if ref else "-"
-        peak = f"{c['peak_mib'] / ref['peak_mib']:.2f}" if ref else "-"
+        r = ref.get((c["n"], c["mu"]))
+        step = f"{c['step_s'] / r['step_s']:.2f}" if r else "-"
+        peak = f"{c['peak_mib'] / r['peak_mib']:.2f}" if r else "-"
         lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {c['amg']} | {c['level0']:.1f} | {c['steps']:.1f} | "
                      f"{step} | {c['peak_mib']:,.0f} | {peak} | {c['contact_force']:.6g} |")
     return "\n".join(lines) + "\n"

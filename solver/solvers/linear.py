@@ -123,17 +123,24 @@ class KrylovTolerance:
             ksp.setTolerances(**self.tolerances(scale))
 
 
-# the displacement's preconditioner in 3-D Example 1 (scripts/amg_3d.py, benchmarks/results/amg_3d.md): Trilinos ML
-# (smoothed aggregation, rigid-body near-nullspace) took the least time per step from 24^3 dofs on; GAMG with plain
-# aggregation (smoothed aggregation turns indefinite under the contact penalty) where PETSc was built without ML
+# The displacement's AMG: GAMG's smoothed aggregation (PETSc's own, the plain elasticity solve's), set up anew
+# whenever J changes. GAMG keeps the interpolation of its first set-up by default (pc_gamg_reuse_interpolation):
+# in 3-D Example 1 that was K's, level 0's first solve before any contact, and with the contact term added its
+# Krylov iterations grew with the penalty and the mesh (92 per solve at 107,811 dofs and mu = 1e-10, where ML took
+# 16; benchmarks/results/amg_3d.md and the first run of krylov_contact_amg.md measured GAMG so, and this file chose
+# Trilinos ML from them). Set up anew, over 10 steps (studies/krylov_contact.py --amg, issue 30): 14.8 Krylov
+# iterations per solve at 107,811 dofs against ML's 12.9, in 0.97-0.99 of ML's time per step and 0.74 of its peak
+# memory; 15.8 against 14.4 at 311,469 dofs, in 0.92 of the time and 0.70 of the memory. Also in PETSc builds
+# without ML. ML stays one option away (solver.petsc_options.mech_pc_type = "ml"): its MIS aggregation is among the
+# defaults for that. With ML's default (uncoupled) aggregation the ninth 3-D iterative model built in one process
+# crashed (SIGSEGV in ML_memory_alloc from ML_Aggregate_CoarsenUncoupled; Debian's PETSc 3.18, Trilinos 13.2); MIS
+# ran 24 in a row (tests/solvers/test_ml_many_models.py).
 SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
+ML_SAFE = {"pc_ml_CoarsenScheme": "MIS"}
 AMG = {
-    # ML's MIS aggregation, not its default (uncoupled): with uncoupled aggregation the ninth 3-D iterative model
-    # built in one process crashed (SIGSEGV in ML_memory_alloc from ML_Aggregate_CoarsenUncoupled; Debian's PETSc
-    # 3.18, Trilinos 13.2); MIS ran 24 in a row, at about one more Krylov iteration per solve (3-D Example 1: 14.0
-    # -> 14.8 at 36,501 dofs, 15.0 -> 16.0 at 107,811) and the same time per step within this machine's noise
-    "ml": {"pc_type": "ml", "pc_ml_CoarsenScheme": "MIS", **SMOOTHER},
-    "gamg": {"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "0", **SMOOTHER},
+    "gamg": {"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "1",
+             "pc_gamg_reuse_interpolation": "false", **SMOOTHER, **ML_SAFE},
+    "ml": {"pc_type": "ml", **ML_SAFE, **SMOOTHER},
 }
 # Fischer's initial guess: each solve starts from the projection of its right-hand side on the last 10 solutions
 # (reset when the matrix changes); the steps of a level sequence have slowly changing right-hand sides
@@ -141,13 +148,13 @@ GUESS = {"ksp_guess_type": "fischer", "ksp_guess_fischer_model": "1,10"}
 
 
 def default_amg() -> str:
-    """``ml`` if this PETSc has Trilinos ML, else ``gamg``."""
-    return "ml" if PETSc.Sys.hasExternalPackage("ml") else "gamg"
+    """``gamg``: GAMG's smoothed aggregation, set up anew when the matrix changes (see :data:`AMG`)."""
+    return "gamg"
 
 
 def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg: str | None = None) -> dict[str, str]:
     """CG (GMRES if the matrix is not symmetric) with algebraic multigrid for the displacement (``elasticity``;
-    ``amg`` = ``ml`` or ``gamg``, default :func:`default_amg`; the rigid-body near-nullspace comes from
+    ``amg`` = ``gamg`` or ``ml``, default :func:`default_amg`; the rigid-body near-nullspace comes from
     :func:`rigid_body_modes`) and Fischer's initial guess, or Jacobi for the damage's mass-plus-diffusion matrix,
     whose diagonal dominates.
 
@@ -171,10 +178,11 @@ def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg
     return opts
 
 
-def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elasticity: bool) -> dict[str, str]:
-    """The options of ``solver.linear = kind``: a direct factorization, or ``iterative``."""
+def linear_options(comm: MPI.Comm, kind: str, symmetric: bool, rtol: float, elasticity: bool,
+                   amg: str | None = None) -> dict[str, str]:
+    """The options of ``solver.linear = kind``: a direct factorization, or ``iterative`` (``amg``: its AMG)."""
     if kind == "iterative":
-        return iterative_options(rtol, elasticity, symmetric)
+        return iterative_options(rtol, elasticity, symmetric, amg)
     return direct_options(comm, kind, symmetric)
 
 
