@@ -138,8 +138,10 @@ class KrylovTolerance:
 SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
 ML_SAFE = {"pc_ml_CoarsenScheme": "MIS"}
 AMG = {
+    # the smoothers' Chebyshev bounds from their own CG estimate, not the smoothed aggregation's: with the latter
+    # the preconditioner went indefinite on 3-D Example 1 at n = 14 with the plain rigid motions as near-nullspace
     "gamg": {"pc_type": "gamg", "pc_gamg_type": "agg", "pc_gamg_agg_nsmooths": "1",
-             "pc_gamg_reuse_interpolation": "false", **SMOOTHER, **ML_SAFE},
+             "pc_gamg_reuse_interpolation": "false", "pc_gamg_use_sa_esteig": "false", **SMOOTHER, **ML_SAFE},
     "ml": {"pc_type": "ml", **ML_SAFE, **SMOOTHER},
 }
 # Fischer's initial guess: each solve starts from the projection of its right-hand side on the last 10 solutions

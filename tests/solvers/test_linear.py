@@ -283,11 +283,11 @@ def test_mumps_reads_its_workspace_option_in_both_solvers(comm):
 
 def test_gamg_builds_its_hierarchy_anew_when_the_contact_enters(comm):
     """The iterative path's AMG is GAMG's smoothed aggregation with its interpolation rebuilt when J changes: its
-    first set-up is K's (level 0 before contact), and the interpolation kept from it, PETSc's default, gives a
-    preconditioner that is not positive definite once the contact penalty 1/mu = 1e10 is in J (3-D Example 1 at
-    n = 6: CG stops, KSP_DIVERGED_INDEFINITE_PC). Built anew, it takes the plain solve's count or fewer."""
+    first set-up is K's (level 0 before contact), and the interpolation kept from it, PETSc's default, does not see
+    the contact penalty 1/mu = 1e10 that J has from then on (3-D Example 1 at n = 6: 119 Krylov iterations over the
+    5 steps, where it went indefinite with GAMG's default Chebyshev bounds). Built anew: 51, fewer than the plain
+    solve's 17 a solve."""
     from solver.config import load
-    from solver.errors import DisplacementSolveError
     from solver.io.results import run
     from solver.run.model import build_model
     from studies import REPO
@@ -301,7 +301,24 @@ def test_gamg_builds_its_hierarchy_anew_when_the_contact_enters(comm):
     rows = run(model, None)
     pc = model.mech.solver.snes.getKSP().getPC()
     assert pc.getType() == "gamg" and rows[0]["factorizations"] == 2  # K, then K + C: two set-ups at level 0
-    steps = rows[1:]
-    assert sum(r["krylov_iterations"] for r in steps) / sum(r["linear_solves"] for r in steps) <= 17
-    with pytest.raises(DisplacementSolveError, match="linear solve -8"):
-        run(build_model(scene("solver.petsc_options.mech_pc_gamg_reuse_interpolation=true"), comm), None)
+    anew = sum(r["krylov_iterations"] for r in rows[1:])
+    assert anew <= 17 * sum(r["linear_solves"] for r in rows[1:])
+    reused = run(build_model(scene("solver.petsc_options.mech_pc_gamg_reuse_interpolation=true"), comm), None)
+    assert sum(r["krylov_iterations"] for r in reused[1:]) > 2 * anew
+
+
+def test_gamg_takes_its_smoothers_bounds_from_their_own_estimate(comm, monkeypatch):
+    """With the smoothed aggregation's eigenvalue estimate as the Chebyshev bounds (GAMG's default) the
+    preconditioner went indefinite on 3-D Example 1 at n = 14 with the plain rigid motions as near-nullspace; with
+    the smoothers' own CG estimate (the solver's default) it converges."""
+    from solver.config import load
+    from solver.io.results import run
+    from solver.run.model import build_model
+    from solver.solvers import newton
+    from studies import REPO
+
+    monkeypatch.setattr(newton, "CONTACT_NEAR_NULLSPACE", False)
+    cfg = load(REPO / "configs/example1_3d.toml", ["mesh.nx=14", "mesh.ny=14", "mesh.nz=14", "time.k=0.02",
+                                                   "time.T=0.04", "output.xdmf=false", "solver.linear='iterative'"])
+    rows = run(build_model(cfg, comm), None)
+    assert rows[-1]["krylov_iterations"] <= 30

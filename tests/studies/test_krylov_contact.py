@@ -39,3 +39,19 @@ def test_the_amg_comparison_runs_each_amg_and_tables_ratios_to_the_solvers():
     text = krylov_contact.amg_table([ml, gamg])
     assert "| 4 | 375 | 1e-10 | gamg |" in text and "| 1.00 |" in text
     assert f"| 4 | 375 | 1e-10 | ml | {ml['level0']:.1f} | {ml['steps']:.1f} |" in text
+
+
+def test_a_failing_solve_is_a_row_of_the_table(monkeypatch):
+    """A case whose displacement solve fails (a preconditioner that breaks down) reports the failure, the study goes
+    on and the table says so."""
+    from solver.errors import DisplacementSolveError
+
+    def fails(model, out):
+        raise DisplacementSolveError("SNES", "DIVERGED_LINEAR_SOLVE", 1, [1.0, 1e8], 1e-10, linear_reason=-8)
+
+    good = krylov_contact.run_case(3, 1e-10, "contact", "gamg")
+    monkeypatch.setattr("solver.io.results.run", fails)
+    bad = krylov_contact.run_case(3, 1e-10, "contact", "gamg-reuse")
+    assert "linear solve -8" in bad["failed"] and bad["dofs"] == good["dofs"] == 192
+    text = krylov_contact.amg_table([good, bad])
+    assert "| 3 | 192 | 1e-10 | gamg-reuse | failed: " in text and "| 3 | 192 | 1e-10 | gamg |" in text
