@@ -68,8 +68,8 @@ def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -
 
 def run_case_apart(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -> dict:
     """:func:`run_case` in a process of its own. Each case then starts from a fresh PETSc; and Debian's PETSc 3.18 with
-    Trilinos ML (the iterative path's AMG) was seen to crash (SIGSEGV in the SNES solve) at the ninth 3-D iterative
-    model built in one process, also at 0af5863 (GAMG does not); not root-caused."""
+    Trilinos ML (the iterative path's AMG before issue 30, ``--amg ml`` here) was seen to crash (SIGSEGV in the SNES
+    solve) at the ninth 3-D iterative model built in one process, also at 0af5863 (GAMG does not); not root-caused."""
     res = subprocess.run([sys.executable, "-m", "studies.krylov_contact", "case", str(n), repr(mu), nullspace, amg],
                          capture_output=True, text=True, cwd=ROOT, env=dict(os.environ), check=True)
     return json.loads(res.stdout.strip().splitlines()[-1])

@@ -30,7 +30,7 @@ class SolverConfig:
 
     ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's
     sequential Cholesky on one process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below
-    linear.AUTO_ITERATIVE_DOFS_3D = 60,000 displacement dofs for a run of 10 steps or more, the iterative solver
+    linear.AUTO_ITERATIVE_DOFS_3D = 60,000 displacement dofs for a run of 20 steps or more, the iterative solver
     for shorter runs from 10,000 dofs and for every run from 60,000 (benchmarks/results/auto_rule.md)."""
 
     rtol: float = 1e-10

@@ -34,12 +34,13 @@ from solver.errors import ConfigError
 # active set moves pays a factorization (MUMPS) or a set-up (iterative) at each change: the steps then weigh less
 # and the rule counts only level 0's two. Before issue 30, measured on netlib's reference BLAS
 # (benchmarks/results/auto_3d/scaling.md), the iterative path was taken from 10,000 dofs for every run.
-# Checked on the later scaling run (scaling.md, 2026-11-26 09:03; docs/benchmarks/performance.md): MUMPS is faster
-# from the first step / 12 / 59 / 194 steps at 10,125 / 36,501 / 107,811 / 311,469 dofs, for 1.2 / 1.6 / 2.6 / 3.6x
-# the iterative path's peak memory.
+# Checked on the later scaling run with GAMG as the iterative path's AMG (scaling.md, 2026-11-26 10:00, 10 steps a
+# case; docs/benchmarks/performance.md): MUMPS is faster from 11 / 21 / 74 / 182 steps at 10,125 / 36,501 / 107,811
+# / 311,469 dofs, for 1.2 / 2.0 / 3.4 / 5.2x the iterative path's peak memory. AUTO_DIRECT_MIN_STEPS_3D went from
+# 10 (the break-even at 36,501 dofs with ML) to 20 (21 with GAMG, 11 at 10,125).
 AUTO_ITERATIVE_DOFS_3D = 60_000
 AUTO_SHORT_RUN_DOFS_3D = 10_000
-AUTO_DIRECT_MIN_STEPS_3D = 10
+AUTO_DIRECT_MIN_STEPS_3D = 20
 NEWTON = NEWTON_METHODS  # the methods that can solve iteratively (the others re-solve one factor)
 
 
@@ -128,13 +129,14 @@ class KrylovTolerance:
 # in 3-D Example 1 that was K's, level 0's first solve before any contact, and with the contact term added its
 # Krylov iterations grew with the penalty and the mesh (92 per solve at 107,811 dofs and mu = 1e-10, where ML took
 # 16; benchmarks/results/amg_3d.md and the first run of krylov_contact_amg.md measured GAMG so, and this file chose
-# Trilinos ML from them). Set up anew, over 10 steps (studies/krylov_contact.py --amg, issue 30): 14.8 Krylov
-# iterations per solve at 107,811 dofs against ML's 12.9, in 0.97-0.99 of ML's time per step and 0.74 of its peak
-# memory; 15.8 against 14.4 at 311,469 dofs, in 0.92 of the time and 0.70 of the memory. Also in PETSc builds
-# without ML. ML stays one option away (solver.petsc_options.mech_pc_type = "ml"): its MIS aggregation is among the
-# defaults for that. With ML's default (uncoupled) aggregation the ninth 3-D iterative model built in one process
-# crashed (SIGSEGV in ML_memory_alloc from ML_Aggregate_CoarsenUncoupled; Debian's PETSc 3.18, Trilinos 13.2); MIS
-# ran 24 in a row (tests/solvers/test_ml_many_models.py).
+# Trilinos ML from them). Set up anew, over 10 steps at mu = 1e-10 (python -m studies.krylov_contact --amg gamg ml
+# gamg-reuse, benchmarks/results/krylov_contact_amg.md, issue 30): 11.9 / 13.8 / 14.8 / 15.8 Krylov iterations per
+# solve at 10,125 / 36,501 / 107,811 / 311,469 dofs against ML's 9.9 / 11.4 / 12.9 / 14.4, ML's step taking 0.96 /
+# 0.86 / 1.13 / 1.11 of GAMG's time and its peak 1.10 / 1.23 / 1.34 / 1.42 of GAMG's (kept: 41.7 / 63.7 / 80.0 /
+# 100.9 iterations). Also in PETSc builds without ML. ML stays one option away (solver.petsc_options.mech_pc_type
+# = "ml"): its MIS aggregation is among the defaults for that. With ML's default (uncoupled) aggregation the ninth
+# 3-D iterative model built in one process crashed (SIGSEGV in ML_memory_alloc from ML_Aggregate_CoarsenUncoupled;
+# Debian's PETSc 3.18, Trilinos 13.2); MIS ran 24 in a row (tests/solvers/test_ml_many_models.py).
 SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
 ML_SAFE = {"pc_ml_CoarsenScheme": "MIS"}
 AMG = {
