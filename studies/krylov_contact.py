@@ -75,9 +75,28 @@ def run_case_apart(n: int, mu: float, nullspace: str = "contact", amg: str = "ga
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def _sizes_and_mus(cases: list[dict]) -> tuple[str, str]:
+    """The --sizes and --mu values of the command that made ``cases``."""
+    return (" ".join(str(n) for n in sorted({c["n"] for c in cases})),
+            " ".join(repr(m) for m in sorted({c["mu"] for c in cases})))
+
+
+def _failed_row(c: dict, label: str, empty: int) -> str:
+    """A table row for a case whose solve failed: the reason, then ``empty`` blank cells."""
+    return f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {label} | failed: {c['failed'][:120]} " + "| " * empty + "|"
+
+
+def _merge(runs: list[dict]) -> dict:
+    """One case from its repeats: the first failure if any failed, else the median step and the largest peak."""
+    failed = [r for r in runs if "failed" in r]
+    if failed:
+        return failed[0]
+    return {**runs[0], "step_s": statistics.median(r["step_s"] for r in runs),
+            "peak_mib": max(r["peak_mib"] for r in runs)}
+
+
 def table(cases: list[dict], repeat: int = 1) -> str:
-    sizes = " ".join(str(n) for n in sorted({c["n"] for c in cases}))
-    mus = " ".join(repr(m) for m in sorted({c["mu"] for c in cases}))
+    sizes, mus = _sizes_and_mus(cases)
     spaces = " ".join(dict.fromkeys(c["nullspace"] for c in cases))
     lines = ["# Krylov iterations against the contact stiffness (3-D Example 1, iterative, one process)", "",
              f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --nullspace {spaces} --repeat {repeat} "
@@ -90,8 +109,11 @@ def table(cases: list[dict], repeat: int = 1) -> str:
              "pair. Absolute times are not comparable between rows.", "",
              "| n | dofs | mu | near-nullspace | Krylov its / solve, level 0 | steps | step time / rigid's "
              "| contact force at T |", "|---|---|---|---|---|---|---|---|"]
-    rigid = {(c["n"], c["mu"]): c["step_s"] for c in cases if c["nullspace"] == "rigid"}
+    rigid = {(c["n"], c["mu"]): c["step_s"] for c in cases if c["nullspace"] == "rigid" and "failed" not in c}
     for c in sorted(cases, key=lambda c: (c["n"], c["mu"], NULLSPACES.index(c["nullspace"]))):
+        if "failed" in c:
+            lines.append(_failed_row(c, c["nullspace"], 3))
+            continue
         ref = rigid.get((c["n"], c["mu"]))
         ratio = f"{c['step_s'] / ref:.2f}" if ref else "-"
         lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {c['nullspace']} | {c['level0']:.1f} | "
@@ -101,8 +123,7 @@ def table(cases: list[dict], repeat: int = 1) -> str:
 
 def amg_table(cases: list[dict]) -> str:
     """The --amg comparison: iterations, step time and peak memory of each AMG against the solver's, per case."""
-    sizes = " ".join(str(n) for n in sorted({c["n"] for c in cases}))
-    mus = " ".join(repr(m) for m in sorted({c["mu"] for c in cases}))
+    sizes, mus = _sizes_and_mus(cases)
     amgs = " ".join(dict.fromkeys(c["amg"] for c in cases))
     lines = ["# Krylov iterations against the contact stiffness, by AMG (3-D Example 1, iterative, one process)", "",
              f"Command: `python -m studies.krylov_contact --sizes {sizes} --mu {mus} --amg {amgs} --output "
@@ -117,8 +138,7 @@ def amg_table(cases: list[dict]) -> str:
     ref = {(c["n"], c["mu"]): c for c in cases if c["amg"] == "gamg" and "failed" not in c}
     for c in sorted(cases, key=lambda c: (c["n"], c["mu"], list(AMGS).index(c["amg"]))):
         if "failed" in c:
-            lines.append(f"| {c['n']} | {c['dofs']:,} | {c['mu']:g} | {c['amg']} | failed: {c['failed'][:120]} "
-                         "| | | | | |")
+            lines.append(_failed_row(c, c["amg"], 5))
             continue
         r = ref.get((c["n"], c["mu"]))
         step = f"{c['step_s'] / r['step_s']:.2f}" if r else "-"
@@ -153,8 +173,7 @@ def main(argv: list[str] | None = None) -> int:
                 for space in a.nullspace:
                     runs[space].append(run_case_apart(n, mu, space))
                     print(json.dumps(runs[space][-1]), flush=True)
-            for rs in runs.values():
-                cases.append({**rs[0], "step_s": statistics.median(r["step_s"] for r in rs)})
+            cases += [_merge(rs) for rs in runs.values()]
     text = table(cases, a.repeat)
     print(text)
     if a.output:
@@ -171,10 +190,7 @@ def _compare_amgs(a: argparse.Namespace) -> int:
                 for amg in a.amg:
                     runs[amg].append(run_case_apart(n, mu, "contact", amg))
                     print(json.dumps(runs[amg][-1]), flush=True)
-            for rs in runs.values():
-                failed = [r for r in rs if "failed" in r]
-                cases.append(failed[0] if failed else {**rs[0], "step_s": statistics.median(r["step_s"] for r in rs),
-                                                       "peak_mib": max(r["peak_mib"] for r in rs)})
+            cases += [_merge(rs) for rs in runs.values()]
     text = amg_table(cases)
     print(text)
     if a.output:

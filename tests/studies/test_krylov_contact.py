@@ -55,3 +55,5 @@ def test_a_failing_solve_is_a_row_of_the_table(monkeypatch):
     assert "linear solve -8" in bad["failed"] and bad["dofs"] == good["dofs"] == 192
     text = krylov_contact.amg_table([good, bad])
     assert "| 3 | 192 | 1e-10 | gamg-reuse | failed: " in text and "| 3 | 192 | 1e-10 | gamg |" in text
+    assert "| 3 | 192 | 1e-10 | contact | failed: " in krylov_contact.table([bad])  # the near-nullspace table too
+    assert krylov_contact._merge([good, bad]) is bad  # a case with a failed repeat is a failed case
