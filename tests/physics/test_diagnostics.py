@@ -97,8 +97,12 @@ def test_reactions_assemble_only_the_dirichlet_rows(comm, dim):
     assert part.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"] < 0.2 * whole.getInfo(
         PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
     start, end = whole.getOwnershipRange()
+    scale = whole.norm(PETSc.NormType.NORM_INFINITY)
     for j, dof in enumerate(constrained + start):
         cols, want = whole.getRow(int(dof))
         got_cols, got = reactions.K.getRow(reactions.K.getOwnershipRange()[0] + j)
-        kept = got != 0.0
-        assert np.array_equal(got_cols[kept], cols[want != 0.0]) and np.array_equal(got[kept], want[want != 0.0])
+        # the same entries; their values the same sums, in parallel possibly added in another order (round-off)
+        full = np.zeros(whole.getSize()[1])
+        full[cols] = want
+        assert set(got_cols[got != 0.0]) == set(cols[want != 0.0])
+        assert np.abs(got - full[got_cols]).max(initial=0.0) <= 1e-14 * scale
