@@ -149,16 +149,12 @@ AMG = {
 # Fischer's initial guess: each solve starts from the projection of its right-hand side on the last 10 solutions
 # (reset when the matrix changes); the steps of a level sequence have slowly changing right-hand sides
 GUESS = {"ksp_guess_type": "fischer", "ksp_guess_fischer_model": "1,10"}
-
-
-def default_amg() -> str:
-    """``gamg``: GAMG's smoothed aggregation, set up anew when the matrix changes (see :data:`AMG`)."""
-    return "gamg"
+DEFAULT_AMG = "gamg"  # GAMG's smoothed aggregation, set up anew when the matrix changes (AMG above)
 
 
 def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg: str | None = None) -> dict[str, str]:
     """CG (GMRES if the matrix is not symmetric) with algebraic multigrid for the displacement (``elasticity``;
-    ``amg`` = ``gamg`` or ``ml``, default :func:`default_amg`; the rigid-body near-nullspace comes from
+    ``amg`` = ``gamg`` or ``ml``, default :data:`DEFAULT_AMG`; the rigid-body near-nullspace comes from
     :func:`rigid_body_modes`) and Fischer's initial guess, or Jacobi for the damage's mass-plus-diffusion matrix,
     whose diagonal dominates.
 
@@ -174,7 +170,7 @@ def iterative_options(rtol: float, elasticity: bool, symmetric: bool = True, amg
     if not symmetric:
         opts["ksp_gmres_restart"] = "200"
     if elasticity:
-        opts.update(AMG[amg or default_amg()])
+        opts.update(AMG[amg or DEFAULT_AMG])
         if symmetric:  # Fischer's projection is in the energy norm of an SPD matrix
             opts.update(GUESS)
     else:

@@ -66,11 +66,11 @@ def test_rigid_body_modes_span_the_kernel_of_elasticity(comm, dim):
 
 
 def test_iterative_options_tie_the_krylov_tolerance_to_newton():
-    from solver.solvers.linear import default_amg, iterative_options, linear_options
+    from solver.solvers.linear import DEFAULT_AMG, iterative_options, linear_options
 
     opts = iterative_options(1e-10, elasticity=True)
     assert opts["ksp_type"] == "cg" and float(opts["ksp_rtol"]) == pytest.approx(1e-11)
-    assert opts["pc_type"] == "gamg" and default_amg() == "gamg"
+    assert opts["pc_type"] == "gamg" and DEFAULT_AMG == "gamg"
     # smoothed aggregation, set up anew when J changes (its first interpolation was K's, without the contact term)
     assert opts["pc_gamg_agg_nsmooths"] == "1" and opts["pc_gamg_reuse_interpolation"] == "false"
     assert opts["ksp_guess_type"] == "fischer" and "ksp_guess_type" not in iterative_options(1e-10, True, False)
@@ -205,13 +205,13 @@ def test_the_model_passes_its_steps_to_the_rule(comm):
     assert (short.linear, long.linear) == ("iterative", "mumps")
 
 
-def _small_3d(linear: str, extra: tuple[str, ...] = ()):
+def _small_3d(linear: str, extra: tuple[str, ...] = (), n: int = 3, k: float = 0.1, T: float = 0.3):
     from conftest import ROOT
 
     from solver.config import load
 
-    return load(ROOT / "configs/example1_3d.toml", ["mesh.nx=3", "mesh.ny=3", "mesh.nz=3", "time.k=0.1", "time.T=0.3",
-                                                     f"solver.linear='{linear}'", *extra])
+    return load(ROOT / "configs/example1_3d.toml", [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", f"time.k={k!r}",
+                                                     f"time.T={T!r}", f"solver.linear='{linear}'", *extra])
 
 
 def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypatch):
@@ -287,15 +287,11 @@ def test_gamg_builds_its_hierarchy_anew_when_the_contact_enters(comm):
     the contact penalty 1/mu = 1e10 that J has from then on (3-D Example 1 at n = 6: 119 Krylov iterations over the
     5 steps, where it went indefinite with GAMG's default Chebyshev bounds). Built anew: 51, fewer than the plain
     solve's 17 a solve."""
-    from solver.config import load
     from solver.io.results import run
     from solver.run.model import build_model
-    from studies import REPO
 
     def scene(*extra):
-        return load(REPO / "configs/example1_3d.toml", ["mesh.nx=6", "mesh.ny=6", "mesh.nz=6", "time.k=0.02",
-                                                        "time.T=0.1", "output.xdmf=false", "solver.linear='iterative'",
-                                                        *extra])
+        return _small_3d("iterative", extra, n=6, k=0.02, T=0.1)
 
     model = build_model(scene(), comm)
     rows = run(model, None)
@@ -311,14 +307,10 @@ def test_gamg_takes_its_smoothers_bounds_from_their_own_estimate(comm, monkeypat
     """With the smoothed aggregation's eigenvalue estimate as the Chebyshev bounds (GAMG's default) the
     preconditioner went indefinite on 3-D Example 1 at n = 14 with the plain rigid motions as near-nullspace; with
     the smoothers' own CG estimate (the solver's default) it converges."""
-    from solver.config import load
     from solver.io.results import run
     from solver.run.model import build_model
     from solver.solvers import newton
-    from studies import REPO
 
     monkeypatch.setattr(newton, "CONTACT_NEAR_NULLSPACE", False)
-    cfg = load(REPO / "configs/example1_3d.toml", ["mesh.nx=14", "mesh.ny=14", "mesh.nz=14", "time.k=0.02",
-                                                   "time.T=0.04", "output.xdmf=false", "solver.linear='iterative'"])
-    rows = run(build_model(cfg, comm), None)
+    rows = run(build_model(_small_3d("iterative", n=14, k=0.02, T=0.04), comm), None)
     assert rows[-1]["krylov_iterations"] <= 30
