@@ -30,6 +30,13 @@ SMALL_2D = ["mesh.nx=8", "mesh.ny=8"]
 SCENES: dict[str, tuple[str, list[str], bool]] = {
     "example1": ("example1.toml", [*SMALL_2D, "time.k=0.02"], True),
     "example1_p2": ("example1.toml", [*SMALL_2D, *P2, "time.k=0.05"], True),
+    # a soft foundation, where the fixed-point methods converge
+    "example1_soft": ("example1.toml", [*SMALL_2D, "time.k=0.05", "boundary.bottom.mu=1.0", "solver.max_it=200"], True),
+    "limited": ("example1.toml", [*SMALL_2D, "time.k=0.05", "boundary.bottom.law='limited_penetration'",
+                                  "boundary.bottom.mu=1e-6", "boundary.bottom.depth=1e-7", "boundary.bottom.mu_stiff=1e-10"],
+                True),
+    "trapezoid": ("example1.toml", [*SMALL_2D, "time.k=0.05", "memory.rule='trapezoid'"], True),
+    "plane_strain": ("example1.toml", [*SMALL_2D, "time.k=0.05", "material.model='plane_strain'"], True),
     "example2": ("example2.toml", [*SMALL_2D, "time.T=0.2"], True),
     "example3": ("example3.toml", [*SMALL_2D, "time.T=0.2"], True),
     "hard": ("hard.toml", ["time.T=0.6", "time.k=0.02"], True),
