@@ -44,8 +44,8 @@ def _keys(coords: np.ndarray) -> np.ndarray:
 
 def _order(coords: np.ndarray) -> np.ndarray:
     """The order of the points by their :func:`_keys` (x, then y, then z, rounded to 1e-10): ``np.lexsort`` on the
-    columns, which sorts distinct points as ``np.argsort(_keys(coords))`` does, 3-4 times faster (the structured
-    comparison took 0.65 s for 200,000 points; issue 30, the end of a run)."""
+    columns, which sorts distinct points as ``np.argsort(_keys(coords))`` does, several times faster than the
+    structured comparison (figures: docs/developer/design-notes.md)."""
     c = np.round(coords, 10)
     return np.lexsort(c.T[::-1])
 

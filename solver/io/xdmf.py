@@ -38,18 +38,15 @@ levels of chunk files that were written completely and will not be written again
   chunk file, the temporary XML), keeps the listed levels with time <= t, checks that
   ``fields/mesh.h5`` is this mesh and appends after them in a new chunk file.
 The price: after a kill, the levels written since the last chunk was closed are not listed
-(up to 100 levels, at most those since the last checkpoint); the old writer listed each level
-as it was written. A restart recomputes them from the checkpoint anyway, because ``flush()``
+(up to 100 levels, at most those since the last checkpoint). A restart recomputes them from the checkpoint anyway, because ``flush()``
 lists every level before the checkpoint is written. Writes are not ``fsync``ed for safety:
 they survive the death of the process, not of the machine.
 
-**Cost.** A level costs one HDF5 group and one dataset per field in memory: about 60-75 us
-per field (h5py's low-level calls, n = 32, measured), the floor of one dataset per level and
-field. The XML is rewritten once per closed chunk, so its cost per level is the file's size
-over the levels per chunk: O(listed levels / 100), about 1 ms per rewrite of 2,000 levels
-(2.4 MB). Levels are written in the calling thread: h5py holds the GIL, so a writer thread
-would not run beside the solver (the old writer's thread paid because ``pwrite`` releases
-it). One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
+**Cost.** A level costs one HDF5 group and one dataset per field in memory, the floor of one
+dataset per level and field. The XML is rewritten once per closed chunk, so its cost per level
+is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
+calling thread: h5py holds the GIL, so a writer thread would not run beside the solver.
+(Figures: docs/developer/design-notes.md.) One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
 page cache; both release the GIL), so that the kernel does not write GBs of dirty pages back
 late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
 
@@ -250,8 +247,8 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 
 
 def _write_dataset(group, name: str, data: np.ndarray, tid, dcpl) -> None:
-    """One field of one level: a new dataset in ``group`` (h5py's low-level calls: half the cost of
-    ``Group.create_dataset``, measured)."""
+    """One field of one level: a new dataset in ``group`` (h5py's low-level calls cost half of
+    ``Group.create_dataset``'s)."""
     import h5py
 
     space = h5py.h5s.create_simple(data.shape)
@@ -333,8 +330,7 @@ class _Settler:
     """A thread that settles closed chunks: ``fdatasync``, then their pages dropped from the page cache.
 
     Without it the kernel keeps GBs of written pages dirty and writes them back late in a long
-    run, where its work slows the solver's memory-bound solves (measured with the earlier
-    writer: n = 128, 2,000 levels, the displacement solve 4.7 -> 6.6 ms per step by the end).
+    run, where its work slows the solver's memory-bound solves (docs/developer/design-notes.md).
     Both calls release the GIL. Not needed for crash safety; a failure is kept and reported.
     """
 

@@ -48,7 +48,7 @@ class Geometry:
         """Length (area) of a named boundary part, summed over ranks: |F| = |x1 - x0| for a segment,
         |(x1 - x0) x (x2 - x0)| / 2 for a triangle, over the owned facets (affine facets, as the built-in and
         gmsh meshes have). From the coordinates, not a form: a form's compiled module is named after its mesh,
-        so every mesh compiled it again (issue 32)."""
+        so every mesh would compile it again."""
         fdim = self.dim - 1
         facets = self.facets(name)
         facets = facets[facets < self.mesh.topology.index_map(fdim).size_local]
@@ -88,7 +88,7 @@ def equispaced(msh: dmesh.Mesh) -> dmesh.Mesh:
     FFCx 0.5 marks it so itself, in place on the mesh's UFL domain, when it first compiles a form on that mesh
     (``ffcx/analysis.py``), after that form's signature was taken. The signatures of the forms made after then
     depend on whether an earlier form was compiled (the domain mutated) or found in the disk cache (not): on an
-    empty cache the same model built twice named a form differently (issue 32, item 15). Marked at creation,
+    empty cache the same model built twice would name a form differently. Marked at creation,
     every signature is the same whatever the cache holds. The variant changes no number of a degree-1 geometry
     (its only nodes are the vertices); ``dolfinx.io.gmshio`` already makes its meshes this way.
     """

@@ -2,18 +2,17 @@
 
 Every ``fem.form`` of dolfinx 0.5.2 asks FFCx for its compiled module. FFCx finds it in its
 disk cache (``~/.cache/fenics``) through an ``importlib`` finder whose directory cache it
-invalidates each time, so every form of every model build lists the whole cache directory:
-about 1 ms per form with 2,000 cached files, 20 of a 50-ms model build on a small mesh, and
-more as the cache grows. A model built many times in one process (the pilot runs and adapted
-meshes of a tolerance run, the studies, the tests) asks for the same modules again. This memo
+invalidates each time, so every form of every model build lists the whole cache directory, a
+cost that grows with the cache (figures: docs/developer/design-notes.md). A model built many
+times in one process (the pilot runs and adapted meshes of a tolerance run, the studies, the
+tests) asks for the same modules again. This memo
 keeps each module found in the disk cache for the process, keyed by everything FFCx's own
 lookup is keyed by (the module's name, which is the forms' signature and the compiler
 parameters, the object names and the cache directory). A module FFCx has not compiled yet
 goes the usual way; once compiled and loaded, it is kept too.
 
 The first lookup of a module in a process opens its file by name (:func:`_direct`) instead of
-listing the cache directory: the whole CLI run of Example 1 asks for 21 modules at start-up,
-about 3 ms each with 3,300 cached files (issue 30, benchmarks/results/startup.md).
+listing the cache directory, which a CLI run's start-up would otherwise pay once per module.
 """
 
 from __future__ import annotations
@@ -67,7 +66,7 @@ _load = ffcx_jit._load_objects
 
 def _loaded(cache_dir, module_name: str, object_names: list[str]):
     """FFCx's ``_load_objects`` (after a compile, and inside a disk lookup), kept in the memo: on a cold cache the
-    modules compiled by the first build are then not looked up on disk again by the second (issue 32)."""
+    modules compiled by the first build are then not looked up on disk again by the second."""
     objects, module = _load(cache_dir, module_name, object_names)
     _found[(module_name, tuple(object_names), str(cache_dir))] = (objects, module)
     return objects, module
