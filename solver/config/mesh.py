@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -99,8 +100,6 @@ def to_toml(m: MeshConfig) -> dict:
 def gmsh_dim(path: str) -> int:
     """Geometric dimension of a .msh file: 3 if any node has z != 0 (read once per version of the file: a tolerance
     run loads its scene a dozen times)."""
-    import os
-
     try:
         st = os.stat(path)
         version = (os.path.realpath(path), st.st_mtime_ns, st.st_size)

@@ -69,6 +69,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from solver.errors import ResultsError
@@ -249,8 +250,6 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 def _write_dataset(group, name: str, data: np.ndarray, tid, dcpl) -> None:
     """One field of one level: a new dataset in ``group`` (h5py's low-level calls cost half of
     ``Group.create_dataset``'s)."""
-    import h5py
-
     space = h5py.h5s.create_simple(data.shape)
     ds = h5py.h5d.create(group, name.encode(), tid, space, dcpl=dcpl)
     ds.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
@@ -299,8 +298,6 @@ class _Chunk:
     """
 
     def __init__(self, path: Path, first: int, slots: int, dtype: np.dtype) -> None:
-        import h5py
-
         self.path, self.first, self.slots = path, first, slots
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
@@ -316,8 +313,6 @@ class _Chunk:
 
     def add(self, t: float, fields: list[tuple[str, np.ndarray]], grid_format: str) -> None:
         """Write one level's fields into group ``NNNN``; its grid is kept once every field is written."""
-        import h5py
-
         slot = f"{len(self.grids):04d}"
         group = h5py.h5g.create(self.h5.id, slot.encode())
         for name, data in fields:
@@ -456,8 +451,6 @@ class XDMFSeries:
             self._write_mesh()
 
     def _write_mesh(self) -> None:
-        import h5py
-
         path = self.data_dir / "mesh.h5"
         tmp = self.data_dir / ".mesh.h5.tmp"
         with h5py.File(tmp, "w") as h5:
@@ -467,8 +460,6 @@ class XDMFSeries:
 
     def _continue(self, keep_until: float) -> None:
         """Keep the levels with t <= keep_until of the existing series, check its mesh, drop unlisted chunks."""
-        import h5py
-
         mesh = self.data_dir / "mesh.h5"
         if not mesh.exists():
             raise SeriesError(f"{self.path} has no {mesh} (written by an older version?): cannot continue it")
@@ -769,8 +760,6 @@ class _Items:
         return t
 
     def _file(self, name: str):
-        import h5py
-
         if name not in self.files:
             target = self.path.parent / name
             if not target.is_file():
@@ -784,8 +773,6 @@ class _Items:
     def load(self, item, what: str, numeric: str = "iuf", read: bool = True) -> np.ndarray:
         """The array a DataItem names (``FILE.h5:/DATASET``), of the shape the XML says; ``read=False``: zeros of
         that shape, taking no memory (the dataset's presence, shape and type checked, its values not read)."""
-        import h5py
-
         text = "" if item is None or item.text is None else item.text.strip()
         name, sep, dataset = text.partition(":")
         if not (name and sep and dataset):

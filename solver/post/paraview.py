@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from solver.errors import ResultsError
+from solver.io.xdmf import read_series
 
 SCRIPT = Path(__file__).with_name("paraview_script.py")
 NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get install paraview python3-paraview xvfb)"
@@ -105,8 +106,6 @@ def check_results(argv: list[str]) -> int | None:
     damaged results directory is a :class:`ResultsError` (the file and what is wrong): VTK's readers print pages of
     errors, or abort, on a truncated ``.h5`` or an XDMF naming a missing file. The XML and every dataset's presence,
     type and shape are checked with h5py; the field values are not read."""
-    from solver.io.xdmf import read_series
-
     spec = importlib.util.spec_from_file_location("paraview_script", SCRIPT)
     script = importlib.util.module_from_spec(spec)
     path = list(sys.path)

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import ResultsError
+from solver.io.xdmf import read_series
 
 
 def read_results(directory: str | Path) -> dict:
@@ -16,8 +17,6 @@ def read_results(directory: str | Path) -> dict:
     DG0 fields per cell; tensors as XX, YY, ZZ, XY, YZ, XZ). Rows are in the mesh's input order,
     the same whatever the number of ranks that wrote them (solver/io/xdmf.py). A damaged directory is a
     :class:`ResultsError` naming the file and what is wrong."""
-    from solver.io.xdmf import read_series
-
     path = Path(directory) / "solution.xdmf"
     res = read_series(path)
     out = {"geometry": res["points"], "topology": res["cells"], "times": res["times"], "fields": {}}
