@@ -1,7 +1,7 @@
 """``study tolerance``: does a run with a tolerance reach it, and at what cost against the best uniform choice?
 
 For every scene (Examples 1-3, configs/hard.toml, Example 1 with a gap of 0.02 and with
-mu = 1e-3) and every tolerance, the tolerance run (solver/run/accuracy.py) is measured against a
+mu = 1e-3) and every tolerance, the tolerance run (solver/run/accuracy/) is measured against a
 fine reference in the paper's norm (max over levels of ||eps(u - u_ref)|| + ||zeta - zeta_ref||),
 with :class:`reference.PointwiseError` (the adapted meshes do not nest in the reference's).
 The reference is itself a P2, second-order tolerance run at ``ref_tol``, with a step a few
@@ -108,7 +108,7 @@ class Reference:
         accuracy = {"accuracy": {"tolerance": tol, "degrees": [2], "max_dofs": MAX_DOFS}}
         p = plan(quiet(scene).replace(accuracy, label="reference"), MPI.COMM_SELF, log=lambda *a: None)
         ref = cls(scene, p.changes, p.k / refine_k, p.geo, f"TOL {tol:g}, P2 order {p.order}",
-                  sum(p.estimate.values()), log=log)
+                  p.estimate.total, log=log)
         ref.seconds = time.perf_counter() - t0  # its planning too
         return ref
 
@@ -234,15 +234,13 @@ def tolerance_run(ref: Reference, scene, tol: float, log=print) -> dict:
     # the sensor (the run's own estimate) is evaluated after the measurement, outside the timed loop
     rec = ref.measure(model, extra_seconds=planning)
     sensor_rows.append(sensor({"t": cfg.time.T}))
-    cells = p.geo.num_cells()
-    del model, sensor
-    p.geo = None
-    gc.collect()
-    rec.update({"tolerance": tol, "degree": p.degree, "order": p.order, "k": p.k, "cells": cells,
-                "planning_seconds": planning, "estimate": sum(p.estimate.values()), "estimate_parts": p.estimate,
+    rec.update({"tolerance": tol, "degree": p.degree, "order": p.order, "k": p.k, "cells": p.geo.num_cells(),
+                "planning_seconds": planning, "estimate": p.estimate.total, "estimate_parts": p.estimate.as_dict(),
                 "estimate_final_level": sensor_rows[-1]["est_space"] + sensor_rows[-1]["est_time"]})
-    log(f"  TOL {tol:g}: P{p.degree} order {p.order} k={p.k:g} {rec['cells']} cells: error {rec['error']:.3e} "
-        f"(estimate {rec['estimate']:.3e}) cost {rec['cost']:.3f} s (planning {planning:.3f} s)")
+    del model, sensor, p  # the plan holds its mesh: free it before the next run
+    gc.collect()
+    log(f"  TOL {tol:g}: P{rec['degree']} order {rec['order']} k={rec['k']:g} {rec['cells']} cells: error "
+        f"{rec['error']:.3e} (estimate {rec['estimate']:.3e}) cost {rec['cost']:.3f} s (planning {planning:.3f} s)")
     return rec
 
 

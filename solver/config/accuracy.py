@@ -1,4 +1,4 @@
-"""[accuracy]: a tolerance on the paper's error norm; the solver then picks degree, mesh and step (solver/run/accuracy.py).
+"""[accuracy]: a tolerance on the paper's error norm; the solver then picks degree, mesh and step (solver/run/accuracy/).
 
 With ``tolerance`` set, the scene's ``mesh.nx``/``ny``/``nz`` (built-in meshes), ``time.k``,
 ``discretization.u_degree`` and ``time.order`` are chosen by the solver; the resolved

@@ -10,6 +10,8 @@ M, the body force f, tractions t on Γ_N and the normal compliance p on Γ_C), w
 
 and ‖ε(u − u_h)‖ ≤ C η with a constant C that the theory leaves open: it is measured
 (calibrated) against the error of solutions whose reference is known, not assumed.
+η is the estimator's indicator (``indicator`` in solver/run/accuracy; ``eta`` in config/damage
+is the damage's truncation, another quantity).
 
 The estimate is assembled as one vector against the piecewise constants (one test function
 per cell), so that η_K² comes out per cell in one assembly, in parallel as in serial. The

@@ -15,7 +15,7 @@ def _square(n: int):
 
 
 def test_a_point_off_the_boundary_by_round_off_is_in_its_nearest_cell():
-    """An adapted mesh's node can come out one ulp outside the square (x = 1 + 2.2e-16, as tests/run/test_accuracy.py
+    """An adapted mesh's node can come out one ulp outside the square (x = 1 + 2.2e-16, as a planned mesh
     met it): dolfinx's collision test misses it once the cells are small (1/256 here), and locate puts it in the cell
     that touches it, with reference coordinates in the triangle up to round-off."""
     points = np.array([[1.0000000000000002, 0.003906250000000001], [1.0000000000000002, 0.6], [0.5, 0.5]])

@@ -1,0 +1,263 @@
+"""The planner: the degree, the mesh and the step that bring the paper's error below a tolerance
+(docs/guide/accuracy.md; the norm: docs/model.md §3.6).
+
+The error is bounded by a space part and a time part (``accuracy.space_share`` of the tolerance bounds the
+space part, the rest the time part). In order:
+
+1. the step (:func:`time_error.choose_step`): step doubling on the start mesh with the lowest degree; the space
+   parts then get what its time error leaves of the tolerance;
+2. the degree (:meth:`Planner._degree`): one solve per degree on the start mesh; the measured rates of adapted
+   meshes extrapolate the dofs each needs, times its cost per dof (``constants``);
+3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
+   is within its part; the solves are those of a :class:`solves.SpaceProbe` (the t = 0 problem, or coarse-step
+   runs to the level of largest indicator where it grows more than GROWTH_AT_0);
+4. zeta's part (:meth:`Planner._fit_zeta`, :mod:`zeta`): while the two space parts exceed the share, a Dörfler
+   step for u that leaves zeta's part room, else a uniform refinement.
+
+The damage's degree follows the displacement's; the order in time is 2 where the scene allows it. The mesh is
+then fixed for the run.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from mpi4py import MPI
+
+from solver.config import Config
+from solver.errors import ToleranceError
+from solver.mesh.adapt import refine, refine_uniformly
+from solver.mesh.geometry import Geometry, build
+from solver.physics.estimator import dorfler
+
+from .constants import ADAPTED_RATE, C_TIMES_2MU, COST_PER_DOF
+from .memory import dof_limit
+from .records import ErrorEstimate, MeshRecord, Plan
+from .scene import degrees, start_mesh, step, time_order, with_changes
+from .solves import AtLargestLevel, AtLevel0, SpaceProbe, solve_level0
+from .time_error import choose_step
+from .zeta import ZetaRuns, zeta_difference, zeta_space
+
+Log = Callable[[str], None]
+
+GROWTH_AT_0 = 1.5  # the indicator growing more over the run: adapt to its largest level instead of t = 0
+THETA_MAX = 0.95  # the largest Dörfler fraction (far from the target)
+ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while the mesh is adapted
+# zeta's part over ZETA_SHARE but at most ROOM_ZETA_MAX of the space share: u's mesh is adapted on to make room
+# (ROOM_MARGIN of zeta's part kept for its change on the new mesh) before any uniform refinement
+ROOM_ZETA_MAX = 0.6
+ROOM_MARGIN = 0.25
+
+
+def dorfler_fraction(theta: float, ratio: float) -> float:
+    """The Dörfler fraction for an estimate ``ratio`` times its target: the cells carrying 1 - 1/ratio^2 of
+    eta^2 (refining them all away would leave the target's eta^2), at least ``theta`` and at most THETA_MAX, so
+    that few solve-estimate-refine rounds are needed (each is a mesh to build)."""
+    return min(THETA_MAX, max(theta, 1.0 - 1.0 / ratio**2))
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What every stage of a plan starts from."""
+
+    scene: Config  # the scene planned for
+    start: dict  # the start mesh's changes to the scene
+    order: int  # the time scheme's order
+    base: Config  # the scene on the start mesh, at ``order``, without XDMF output
+    geo0: Geometry  # the start mesh
+    constants: dict[int, float]  # C per degree for the scene's material
+    tol: float  # the absolute tolerance
+    max_dofs: int  # no mesh beyond it
+    limit: str  # the setting ``max_dofs`` comes from
+    started: float  # perf_counter at the start of planning
+
+
+def prepare(scene: Config, comm: MPI.Comm, log: Log) -> Setup:
+    """The start mesh, the order, the constants, the absolute tolerance (a relative one times ||eps(u_0)||, one
+    solve) and the dof limit. Collective."""
+    started = time.perf_counter()
+    acc = scene.accuracy
+    if not acc.enabled:
+        raise ValueError("plan: the scene has no accuracy.tolerance")
+    cfg = with_changes(scene, {"output": {"xdmf": False}})
+    start = start_mesh(cfg, comm)
+    order = time_order(with_changes(cfg, start))
+    base = with_changes(cfg, start, {"time": {"order": order}})
+    geo0 = build(comm, base.mesh, cfg.boundaries, cfg.dim)
+    two_mu = cfg.material.E / (1.0 + cfg.material.nu)
+    constants = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
+    tol = acc.tolerance
+    if acc.relative:
+        tol = acc.tolerance * solve_level0(with_changes(base, degrees(max(acc.degrees))), comm, geo0).strain_norm
+        log(f"tolerance {acc.tolerance:g} x ||eps(u_0)|| = {tol:.4g}")
+    max_dofs, limit = dof_limit(acc, comm)
+    return Setup(scene, start, order, base, geo0, constants, tol, max_dofs, limit, started)
+
+
+class Planner:
+    """One plan from a :class:`Setup` (:meth:`plan` runs it). Holds what the stages share: each degree's sequence
+    of solved meshes and the zeta runs already made."""
+
+    def __init__(self, setup: Setup, comm: MPI.Comm, log: Log) -> None:
+        self.setup, self.comm, self.log = setup, comm, log
+        self.acc = setup.scene.accuracy
+        self.seqs: dict[int, list[MeshRecord]] = {d: [] for d in self.acc.degrees}
+        self.runs = ZetaRuns()
+
+    def plan(self) -> Plan:
+        """The stages in the module docstring's order. Collective."""
+        s, acc = self.setup, self.acc
+        pilot = with_changes(s.base, degrees(min(acc.degrees)))  # the time error hardly depends on the degree
+        chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
+        # the space parts get what the chosen step leaves of TOL
+        share = s.tol - chosen.error
+        at_k0 = with_changes(s.base, step(chosen.k0))
+        probe: SpaceProbe = AtLevel0(at_k0, chosen.growth)
+        if chosen.growth > GROWTH_AT_0:
+            probe = AtLargestLevel(with_changes(at_k0, {"time": {"T": chosen.largest_t}}))
+            self.log(f"  the mesh is adapted to the level of largest eta, t = {chosen.largest_t:g}")
+        degree, (geo, cells) = self._degree(probe, share)
+        geo, cells = self._mesh(probe, degree, share, geo, cells)
+        # zeta's runs go to the scene's T at the pilots' coarsest step
+        geo, zeta_bound = self._fit_zeta(probe, degree, share, geo, cells, with_changes(at_k0, degrees(degree)))
+        estimate = ErrorEstimate(self.seqs[degree][-1].estimate * probe.factor, zeta_bound, chosen.error)
+        seconds = time.perf_counter() - s.started
+        out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, s.constants[degree], chosen.growth,
+                   chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
+                   seconds, s.scene)
+        self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
+                 f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
+                 f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
+                 f"TOL {s.tol:.3e}; planned in {seconds:.1f} s")
+        return out
+
+    def _needed_dofs(self, degree: int, growth: float, share: float) -> float:
+        """The dofs the degree's first mesh predicts for ``share`` by its adapted rate (error ~ dofs^-rate)."""
+        first = self.seqs[degree][0]
+        return first.dofs * max(first.estimate * growth / share, 1.0) ** (1.0 / ADAPTED_RATE[degree])
+
+    def _degree(self, probe: SpaceProbe, share: float) -> tuple[int, tuple]:
+        """One solve of each degree on the start mesh; the one whose predicted cost per step (the dofs it needs,
+        times its cost per dof) is lowest. Returns it and (mesh, eta_K^2) of its solve."""
+        last, cost = {}, {}
+        for d in self.acc.degrees:
+            last[d] = self._adapt(probe, d, share / probe.growth, geo=self.setup.geo0, max_steps=1)
+            cost[d] = COST_PER_DOF[d] * self._needed_dofs(d, probe.growth, share)
+        degree = min(self.acc.degrees, key=lambda d: cost[d])
+        self.log("predicted cost per step (P1-dof units): " + ", ".join(f"P{d} {cost[d]:.4g}" for d in self.acc.degrees)
+                 + f" -> P{degree}")
+        self._refuse_beyond_reach(probe, share)
+        return degree, last[degree]
+
+    def _refuse_beyond_reach(self, probe: SpaceProbe, share: float) -> None:
+        """Refuse at once a tolerance whose predicted dofs exceed the limit for every degree, instead of refining
+        for hours towards it."""
+        needed = {d: self._needed_dofs(d, probe.growth, share) for d in self.acc.degrees}
+        best = min(needed, key=needed.get)
+        if needed[best] > self.setup.max_dofs:
+            first = self.seqs[best][0]
+            raise ToleranceError(self.setup.tol, first.estimate * probe.growth, first.dofs, self.setup.limit,
+                                 target=share, predicted=needed[best])
+
+    def _mesh(self, probe: SpaceProbe, degree: int, share: float, geo: Geometry, cells: np.ndarray) -> tuple:
+        """u's mesh: adapted on from the degree's probe until C eta times the growth is within (1 - ZETA_SHARE) of
+        the space share. Returns (mesh, eta_K^2)."""
+        target = (1.0 - ZETA_SHARE) * share / probe.factor
+        if self.seqs[degree][-1].estimate > target:
+            geo, cells = self._adapt(probe, degree, target, marked=(geo, cells))
+        return geo, cells
+
+    def _fit_zeta(self, probe: SpaceProbe, degree: int, share: float, geo: Geometry, cells: np.ndarray,
+                  run_k0: Config) -> tuple[Geometry, float]:
+        """zeta's space error on ``geo``, from its differences to up to two earlier meshes of the sequence (each with
+        at most a quarter of the next one's cells) or to its uniform refinement. While the two space parts exceed
+        the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
+        step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
+        mesh and zeta's bound on it."""
+        seq, C, G = self.seqs[degree], self.setup.constants[degree], probe.factor
+        chain: list[Geometry] = []  # the coarsest first
+        for r in reversed(seq):
+            if r.geo is not None and len(chain) < 2 and r.cells * 4 <= (chain[0] if chain else geo).num_cells():
+                chain.insert(0, r.geo)
+        z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
+        self.log(f"  zeta's space error on it <= {z.bound:.3e}")
+        while seq[-1].estimate * G + z.bound > share:
+            if z.bound <= ROOM_ZETA_MAX * share:
+                room = self._make_room(probe, degree, share, run_k0, geo, cells, z.bound)
+                if room is not None:
+                    return room
+            finer = refine_uniformly(geo) if z.finer is None else z.finer
+            if finer.num_cells() * degree**finer.dim > self.setup.max_dofs:  # about p^dim dofs per cell
+                raise ToleranceError(self.setup.tol, z.bound, finer.num_cells(),
+                                     f"{self.setup.limit} (the damage's space error)",
+                                     target=share - seq[-1].estimate * G)
+            chain, geo = [*chain, geo][-2:], finer
+            z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
+            lv = probe.solve(degree, self.comm, geo)
+            cells = lv.cell_indicators
+            seq.append(MeshRecord(degree, geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator, uniform=True))
+            self.log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {seq[-1].estimate:.3e}, zeta's space "
+                     f"error <= {z.bound:.3e}")
+        return geo, z.bound
+
+    def _make_room(self, probe: SpaceProbe, degree: int, share: float, run_k0: Config, geo: Geometry,
+                   cells: np.ndarray, zeta_bound: float) -> tuple[Geometry, float] | None:
+        """A Dörfler step for u that leaves zeta's part room within the space share, instead of a uniform refinement.
+
+        On the mesh M (``geo``, with its eta_K^2) zeta's error is at most ``zeta_bound``; u is adapted on from M to
+        C eta G <= share - (1 + ROOM_MARGIN) zeta_bound, giving M' that refines M. By the triangle inequality zeta's
+        error on M' is at most zeta_bound + D, with D = max over levels of ||zeta_M' - zeta_M|| (runs at the same
+        step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_bound + D <= share; returns
+        (M', zeta_bound + D), or None (M' is then dropped, and the caller refines M uniformly)."""
+        seq, G = self.seqs[degree], probe.factor
+        n = len(seq)
+        target = (share - (1.0 + ROOM_MARGIN) * zeta_bound) / G
+        finer, _ = self._adapt(probe, degree, target, marked=(geo, cells))
+        bound = zeta_bound
+        if run_k0.damage.enabled:
+            bound += zeta_difference(*self.runs.on(run_k0, self.comm, [geo, finer]), self.comm)
+        total = seq[-1].estimate * G + bound
+        self.log(f"  a Dörfler step for u: {finer.num_cells()} cells, C eta = {seq[-1].estimate:.3e}, zeta's "
+                 f"space error <= {bound:.3e}: {'taken' if total <= share else 'over the share, refined uniformly instead'}")
+        if total <= share:
+            return finer, bound
+        del seq[n:]
+        return None
+
+    def _adapt(self, probe: SpaceProbe, degree: int, target: float, geo: Geometry | None = None,
+               max_steps: int | None = None, marked: tuple | None = None) -> tuple:
+        """Dörfler-refine until C eta <= target (or ``max_steps`` meshes solved), appending each mesh's record to
+        the degree's sequence; beyond the dof limit, a ToleranceError for the user's tolerance. Starts on ``geo``,
+        or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Returns the last
+        mesh and its eta_K^2."""
+        seq, C, theta = self.seqs[degree], self.setup.constants[degree], self.acc.theta
+
+        def refined(mesh: Geometry, cells: np.ndarray) -> Geometry:
+            fraction = dorfler_fraction(theta, seq[-1].estimate / target)
+            return refine(mesh, np.flatnonzero(dorfler(cells, fraction, self.comm)))
+
+        if marked is not None:
+            geo = refined(*marked)
+        solved = 0
+        while True:
+            lv = probe.solve(degree, self.comm, geo)
+            rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator,
+                             geo=lv.model.geo)
+            seq.append(rec)
+            solved += 1
+            self.log(f"  P{degree}: {rec.cells} cells, {rec.dofs} dofs, C eta = {rec.estimate:.3e} "
+                     f"(target {target:.3e})")
+            if rec.estimate <= target or (max_steps is not None and solved >= max_steps):
+                return lv.model.geo, lv.cell_indicators
+            if rec.dofs > self.setup.max_dofs:
+                raise ToleranceError(self.setup.tol, rec.estimate, rec.dofs, self.setup.limit, target=target)
+            geo = refined(lv.model.geo, lv.cell_indicators)
+
+
+def plan(scene: Config, comm: MPI.Comm, log: Log = print) -> Plan:
+    """Choose degree, mesh and step for the scene's ``accuracy.tolerance`` (collective): ``scene`` is a Config,
+    and the run's is ``plan(...).config``."""
+    return Planner(prepare(scene, comm, log), comm, log).plan()

@@ -1,0 +1,92 @@
+"""What a plan chose and the estimates behind it, as records (plan.json is :meth:`Plan.summary`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver.config import Config
+from solver.mesh.geometry import Geometry
+
+from .scene import degrees, merged
+
+
+@dataclass(frozen=True)
+class ErrorEstimate:
+    """Bounds of the three parts of the error in the paper's norm (docs/model.md §3.6)."""
+
+    space_u: float  # C times the estimator's indicator, times its growth over the run
+    space_zeta: float  # the damage's space error, from nested meshes
+    time: float  # the time error of the chosen step, by step doubling
+
+    @property
+    def total(self) -> float:
+        return self.space_u + self.space_zeta + self.time
+
+    def as_dict(self) -> dict[str, float]:
+        return {"space_u": self.space_u, "space_zeta": self.space_zeta, "time": self.time}
+
+
+@dataclass(frozen=True)
+class MeshRecord:
+    """One mesh the planner solved on: its size, the estimator's indicator and the bound C times it."""
+
+    degree: int
+    cells: int
+    dofs: int
+    indicator: float  # the residual estimator's eta (docs: solver/physics/estimator.py)
+    estimate: float  # C times ``indicator``
+    uniform: bool = False  # a uniform refinement (for the damage's part), not a Dörfler step
+    geo: Geometry | None = None  # the mesh of a Dörfler step (zeta's nested chain is drawn from them)
+
+    def summary(self) -> dict:
+        """The record as plan.json writes it."""
+        out = {"degree": self.degree, "cells": self.cells, "dofs": self.dofs, "eta": self.indicator,
+               "estimate": self.estimate}
+        if self.uniform:
+            out["uniform"] = True
+        return out
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What the tolerance chose, and the estimates behind it."""
+
+    tolerance: float  # absolute
+    degree: int
+    order: int
+    k: float
+    geo: Geometry  # the chosen (adapted) mesh
+    start: dict  # the start mesh's changes to the scene ({} or {"mesh": {"nx": .., "ny": ..}})
+    estimate: ErrorEstimate
+    C: float  # the estimator's constant for the chosen degree and material
+    growth: float  # the indicator's growth over the run on the start mesh
+    time_rate: float  # the observed order in the step
+    time_profile: tuple[np.ndarray, np.ndarray]  # (t, estimated time error at k) from the pilot runs
+    adaptation: tuple[MeshRecord, ...]
+    seconds: float  # planning time
+    scene: Config  # the scene planned for
+
+    @property
+    def changes(self) -> dict:
+        """The changes to the scene of the chosen degrees, order and step (the mesh is ``geo``)."""
+        return merged(self.start, degrees(self.degree), {"time": {"order": self.order, "k": self.k}})
+
+    @property
+    def config(self) -> Config:
+        """The scene planned for with the chosen degrees, order and step: what the run is built from."""
+        return self.scene.replace(self.changes, label="plan")
+
+    def time_error(self, t: float) -> float:
+        """The estimated time error at time ``t`` (the profile's last level at or before it)."""
+        ts, es = self.time_profile
+        i = int(np.searchsorted(ts, t + 1e-12 * max(1.0, t), side="right")) - 1
+        return float(es[max(i, 0)]) if len(es) else 0.0
+
+    def summary(self) -> dict:
+        """plan.json's content."""
+        return {"tolerance": self.tolerance, "u_degree": self.degree, "zeta_degree": self.degree, "order": self.order,
+                "k": self.k, "cells": self.geo.num_cells(), "estimate": self.estimate.as_dict(), "C": self.C,
+                "growth": self.growth, "time_rate": self.time_rate,
+                "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds}

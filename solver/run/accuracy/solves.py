@@ -1,0 +1,136 @@
+"""The solves the planner measures with: the t = 0 problem, a run to its level of largest indicator, and pilot runs
+that keep every level. Each is a function that runs the solves and returns a record."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from mpi4py import MPI
+
+from solver.config import Config
+from solver.errors import SolveFailure
+from solver.mesh.geometry import Geometry
+from solver.physics.estimator import estimator_for
+from solver.run.model import Model, build_model
+from solver.run.stepper import Stepper, levels
+
+from .scene import degrees, elastic, step, with_changes
+
+# a step Newton cannot take on a finer mesh is halved up to this many times
+HALVINGS = 3
+
+
+@dataclass(frozen=True)
+class LevelSolve:
+    """A solved level on a mesh: the estimator's indicator eta, its cells' eta_K^2 and the dofs."""
+
+    model: Model
+    indicator: float
+    cell_indicators: np.ndarray  # eta_K^2 of the owned cells
+    dofs: int  # displacement dofs over all ranks
+    strain_norm: float | None = None  # ||eps(u_0)|| (the t = 0 problem only)
+
+
+def displacement_dofs(model: Model) -> int:
+    """Displacement dofs over all ranks."""
+    dofmap = model.u.function_space.dofmap
+    return dofmap.index_map.size_global * dofmap.index_map_bs
+
+
+def solve_level0(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
+    """The t = 0 problem of ``cfg`` on ``geo`` (without memory and damage, which level 0 does not touch)."""
+    model = build_model(elastic(cfg), comm, geo)
+    row = Stepper(model).step(0)
+    est = estimator_for(model)
+    cells = est.cells()
+    return LevelSolve(model, est.total(cells), cells, displacement_dofs(model), row["strain_norm"])
+
+
+def solve_largest_level(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
+    """A run of ``cfg`` on ``geo`` (to its T): the level of largest indicator (scenes whose load starts at zero have
+    nothing to adapt to at t = 0). A step Newton cannot take is halved (up to HALVINGS times)."""
+    for halving in range(HALVINGS + 1):
+        model = build_model(with_changes(cfg, step(cfg.time.k / 2**halving)), comm, geo)
+        est = estimator_for(model)
+        largest, largest_cells = -1.0, None
+        try:
+            for _ in levels(model):
+                cells = est.cells()
+                indicator = est.total(cells)
+                if indicator > largest:
+                    largest, largest_cells = indicator, cells
+            return LevelSolve(model, largest, largest_cells, displacement_dofs(model))
+        except SolveFailure:
+            if halving == HALVINGS:
+                raise
+    raise AssertionError("unreachable: the last halving re-raises")
+
+
+@dataclass
+class PilotRun:
+    """A run on a fixed mesh that kept u and zeta (and, if asked, the indicator) at every level."""
+
+    model: Model
+    t: list[float] = field(default_factory=list)
+    u: list[np.ndarray] = field(default_factory=list)
+    zeta: list[np.ndarray] = field(default_factory=list)
+    indicator: list[float] = field(default_factory=list)
+
+
+def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool = False) -> PilotRun:
+    """Run ``cfg`` on ``geo`` keeping every level's u and zeta, and the indicator with ``indicator``."""
+    model = build_model(cfg, comm, geo)
+    est = estimator_for(model) if indicator else None
+    out = PilotRun(model)
+    for row in levels(model):
+        out.t.append(row["t"])
+        out.u.append(model.u.x.array.copy())
+        if model.damage is not None:
+            out.zeta.append(model.damage.zeta.x.array.copy())
+        if est is not None:
+            out.indicator.append(est.total())
+    return out
+
+
+class SpaceProbe(Protocol):
+    """What u's mesh is solved and judged with: the solve of a degree on a mesh, and the indicator's growth
+    over the run, by which C eta of that solve is multiplied (``factor``, at least 1)."""
+
+    growth: float
+
+    @property
+    def factor(self) -> float: ...
+
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve: ...
+
+
+class AtLevel0:
+    """The t = 0 problem of ``scene``, its indicator times the ``growth`` measured over the run on the start mesh."""
+
+    def __init__(self, scene: Config, growth: float) -> None:
+        self.scene, self.growth = scene, growth
+
+    @property
+    def factor(self) -> float:
+        return max(self.growth, 1.0)
+
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
+        return solve_level0(with_changes(self.scene, degrees(degree)), comm, geo)
+
+
+class AtLargestLevel:
+    """Coarse-step runs of ``scene`` to its level of largest indicator, which counts as it is (growth 1)."""
+
+    growth = 1.0
+
+    def __init__(self, scene: Config) -> None:
+        self.scene = scene
+
+    @property
+    def factor(self) -> float:
+        return 1.0
+
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
+        return solve_largest_level(with_changes(self.scene, degrees(degree)), comm, geo)

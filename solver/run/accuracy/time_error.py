@@ -1,0 +1,132 @@
+"""The time part: step doubling on the start mesh (docs/guide/accuracy.md, "step").
+
+Runs at k0, k0/2 and k0/4 (k0 = T/N0) give the observed order p (at most the scheme's) and the error of k0/4,
+D/(2^p - 1), in the paper's norm (docs/model.md §3.6); the step is the largest T/(N0 2^j) whose extrapolated
+error is within SAFETY times the time's share of the tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+
+from solver.config import Config
+from solver.errors import SolveFailure, ToleranceError
+from solver.mesh.geometry import Geometry
+from solver.run.model import Model
+
+from .scene import step, with_changes
+from .solves import PilotRun, pilot_run
+
+N0 = 10  # the coarsest step is T / N0; every step considered is T / (N0 2^j)
+SAFETY = 0.8  # of the time's share, for the extrapolated error of the chosen step
+START_HALVINGS = 6  # a start step the scheme cannot take is halved, and the three runs start again
+MAX_HALVINGS = 20  # the step is refused beyond T / (N0 2^MAX_HALVINGS)
+
+
+@dataclass(frozen=True)
+class TimeEstimate:
+    """What the three pilot runs at k, k/2, k/4 measured."""
+
+    rate: float  # the observed order p
+    error: float  # the error of the k/4 run
+    times: np.ndarray  # the k/2 run's levels
+    profile: np.ndarray  # the k/4 run's error at those levels
+
+
+@dataclass(frozen=True)
+class StepChoice:
+    """The step the pilot runs on the start mesh choose, and what they measured."""
+
+    k0: float  # the pilots' coarsest step (T / N0, halved while the scheme could not take it)
+    k: float  # the chosen step, k0 / 2^j
+    rate: float  # the observed order in k
+    error: float  # the time error's bound at k
+    times: np.ndarray  # the levels of the time error's profile
+    profile: np.ndarray  # the time error at k on those levels
+    growth: float  # the indicator's largest level over its level 0 (the first pilot)
+    largest_t: float  # the time of that level
+
+
+def norms(model: Model, comm: MPI.Comm) -> tuple[Callable[[np.ndarray], float], Callable[[np.ndarray], float]]:
+    """||eps(v)|| and ||z|| of arrays on the model's spaces (collective; ||z|| is 0 without damage)."""
+    V = model.u.function_space
+    dv = fem.Function(V)
+    eps = ufl.sym(ufl.grad(dv))
+    fu = fem.form(ufl.inner(eps, eps) * ufl.dx)
+    fz = dz = None
+    if model.damage is not None:
+        dz = fem.Function(model.damage.V)
+        fz = fem.form(dz * dz * ufl.dx)
+
+    def norm_u(a: np.ndarray) -> float:
+        dv.x.array[:] = a
+        return math.sqrt(max(comm.allreduce(fem.assemble_scalar(fu), op=MPI.SUM), 0.0))
+
+    def norm_z(a: np.ndarray) -> float:
+        if fz is None:
+            return 0.0
+        dz.x.array[:] = a
+        return math.sqrt(max(comm.allreduce(fem.assemble_scalar(fz), op=MPI.SUM), 0.0))
+
+    return norm_u, norm_z
+
+
+def time_estimate(runs: list[PilotRun], order: int, comm: MPI.Comm) -> TimeEstimate:
+    """From runs at k, k/2, k/4 on one mesh: the observed order (within [1/2, ``order``]) and the k/4 run's error,
+    overall and at the k/2 levels (Richardson: the difference over 2^p - 1)."""
+    norm_u, norm_z = norms(runs[0].model, comm)
+
+    def diff(a: PilotRun, b: PilotRun) -> np.ndarray:
+        out = []
+        for j in range(len(a.t)):
+            d = norm_u(a.u[j] - b.u[2 * j])
+            if a.zeta:
+                d += norm_z(a.zeta[j] - b.zeta[2 * j])
+            out.append(d)
+        return np.array(out)
+
+    d1, d2 = diff(runs[0], runs[1]), diff(runs[1], runs[2])
+    m1, m2 = float(d1.max()), float(d2.max())
+    if m2 <= 1e-14 * max(1.0, m1):
+        return TimeEstimate(float(order), 0.0, np.array(runs[1].t), np.zeros(len(d2)))
+    p = math.log2(m1 / m2) if m1 > 0 else float(order)
+    p = min(max(p, 0.5), float(order))
+    return TimeEstimate(p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1))
+
+
+def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
+                log: Callable[[str], None]) -> StepChoice:
+    """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
+    T / (N0 2^j) whose time error is within SAFETY times ``share``. ``tol`` names the tolerance in a refusal."""
+    k0 = pilot.time.T / N0
+    for _ in range(START_HALVINGS):
+        try:
+            pilots = [pilot_run(with_changes(pilot, step(k0 / 2**j)), comm, geo, indicator=(j == 0))
+                      for j in range(3)]
+            break
+        except SolveFailure:
+            k0 /= 2
+    else:
+        raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+    est = time_estimate(pilots, order, comm)
+    p, e_k4 = est.rate, est.error
+    indicator = np.array(pilots[0].indicator)
+    largest = int(np.argmax(indicator))
+    growth = float(indicator[largest] / indicator[0]) if indicator[0] > 0 else math.inf
+    log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} "
+        f"over the run")
+    j, k4 = 0, k0 / 4
+    while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share:
+        j += 1
+        if j > MAX_HALVINGS:
+            raise ToleranceError(tol, e_k4, 0, "time.k")
+    k = k0 / 2**j
+    scale = (k / k4) ** p if e_k4 > 0 else 0.0
+    return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest])

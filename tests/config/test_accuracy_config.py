@@ -1,0 +1,30 @@
+"""solver/config/accuracy.py: the [accuracy] table's checks."""
+
+import pytest
+from conftest import ROOT
+
+from solver.config import load
+from solver.errors import ConfigError
+
+SCENE = ROOT / "configs/example1.toml"
+
+
+@pytest.mark.parametrize("bad", ["nan", "0", "1", "1.5", "-1e-3", "inf", '"small"'])
+def test_bad_tolerances_are_refused(bad):
+    with pytest.raises(ConfigError) as err:
+        load(SCENE, [f"accuracy.tolerance={bad}"])
+    assert err.value.key == "accuracy.tolerance"
+
+
+@pytest.mark.parametrize("key,bad", [("space_share", "0"), ("space_share", "1"), ("theta", "1.5"), ("max_dofs", "0"),
+                                     ("degrees", "[]"), ("degrees", "[3]")])
+def test_bad_settings_are_refused(key, bad):
+    with pytest.raises(ConfigError) as err:
+        load(SCENE, [f"accuracy.{key}={bad}"])
+    assert err.value.key == f"accuracy.{key}"
+
+
+def test_a_tolerance_on_a_3d_scene_is_refused():
+    with pytest.raises(ConfigError) as err:
+        load(ROOT / "configs/example1_3d.toml", ["accuracy.tolerance=1e-2"])
+    assert err.value.key == "accuracy.tolerance" and "2-D" in err.value.allowed

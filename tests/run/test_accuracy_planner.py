@@ -1,0 +1,142 @@
+"""solver/run/accuracy/planner.py: what a tolerance chooses, the same on 2 ranks as on one, and the refusals.
+Whether the achieved error meets the tolerance is measured by ``study tolerance`` against fine references; here
+one small case checks it in the suite."""
+
+import math
+
+import pytest
+from conftest import ROOT
+from conftest import run_cli as cli
+from mpi4py import MPI
+
+from solver.config import load
+from solver.errors import ToleranceError
+from solver.run.accuracy import memory, planner
+from solver.run.accuracy.planner import THETA_MAX, dorfler_fraction, plan
+
+SCENE = ROOT / "configs/example1.toml"
+SHORT = {"time": {"T": 0.2}}  # the paper's Example 1 over 0.2 s: quick, with memory and damage
+
+
+def _short():
+    return load(SCENE).replace(SHORT)
+
+
+def _plan(comm, tol, accuracy=None):
+    return plan(_short().replace({"accuracy": {"tolerance": tol, **(accuracy or {})}}), comm, log=lambda *a: None)
+
+
+def test_the_dorfler_fraction_follows_the_distance_to_the_target():
+    assert dorfler_fraction(0.5, 1.1) == 0.5  # near: the scene's theta
+    assert dorfler_fraction(0.5, 3.0) == pytest.approx(1.0 - 1.0 / 9.0)
+    assert dorfler_fraction(0.5, 100.0) == THETA_MAX  # far: capped
+
+
+def test_a_scene_without_a_tolerance_is_not_planned(comm):
+    with pytest.raises(ValueError, match="no accuracy.tolerance"):
+        plan(_short(), comm, log=lambda *a: None)
+
+
+def test_a_tolerance_chooses_p2_second_order_and_meets_its_own_estimate(comm):
+    p = _plan(comm, 3e-3)
+    assert p.degree == 2 and p.order == 2  # P2 converges at twice P1's rate in dofs on adapted meshes
+    assert p.estimate.total <= 3e-3
+    assert p.geo.num_cells() > 32  # adapted from the 4 x 4 start
+    assert p.adaptation[-1].cells == p.geo.num_cells() and p.adaptation[-1].degree == 2
+    tighter = _plan(comm, 1e-3)
+    assert tighter.geo.num_cells() > p.geo.num_cells() and tighter.estimate.total <= 1e-3
+
+
+def test_a_relative_tolerance_is_the_tolerance_times_the_strain_at_0(comm):
+    from solver.run.accuracy.scene import degrees, with_changes
+    from solver.run.accuracy.solves import solve_level0
+
+    setup = planner.prepare(_short().replace({"accuracy": {"tolerance": 0.1, "relative": True}}), comm,
+                            log=lambda *a: None)
+    at_0 = solve_level0(with_changes(setup.base, degrees(2)), comm, setup.geo0)
+    assert setup.tol == 0.1 * at_0.strain_norm and at_0.strain_norm > 0
+
+
+def test_parallel_plan_equals_serial(comm):
+    p = _plan(comm, 3e-3)
+    serial = _plan(MPI.COMM_SELF, 3e-3) if comm.size > 1 else p
+    assert (p.degree, p.order, p.k, p.geo.num_cells()) == (serial.degree, serial.order, serial.k,
+                                                           serial.geo.num_cells())
+    for key, value in p.estimate.as_dict().items():
+        assert math.isclose(value, serial.estimate.as_dict()[key], rel_tol=1e-8, abs_tol=1e-14)
+
+
+@pytest.mark.serial
+@pytest.mark.slow
+def test_the_achieved_error_is_below_the_tolerance():
+    """Example 1 over 0.2 s at TOL 3e-3, against a P2 reference planned at 3e-4 with a 4x smaller step."""
+    from studies.tolerance import Reference, tolerance_run
+
+    ref = Reference.planned(_short(), 3e-4, 4, log=lambda *a: None)
+    rec = tolerance_run(ref, _short(), 3e-3, log=lambda *a: None)
+    assert 0.2 * 3e-3 <= rec["error"] <= 3e-3, rec
+
+
+@pytest.mark.serial
+def test_a_tolerance_run_restarts_on_the_same_mesh(tmp_path):
+    """--restart plans again (the plan is deterministic), so the checkpoint fits the mesh and the last level
+    is reproduced."""
+    from solver.io.timeseries import TIMING_COLUMNS
+    from solver.post.results import read_csv
+
+    out = tmp_path / "o"
+    args = ["run", "configs/example1.toml", "--tolerance", "1e-2", "--set", "time.T=0.2", "--set",
+            "output.checkpoint_every=1", "--output", str(out), "--no-progress"]
+    assert cli(args).returncode == 0
+    first = read_csv(out / "timeseries.csv")
+    res = cli([*args, "--restart"])
+    assert res.returncode == 0, res.stderr
+    again = read_csv(out / "timeseries.csv")
+    assert len(again) == len(first)
+    skip = {*TIMING_COLUMNS, "factorizations"}
+    for key in first[-1]:
+        if key not in skip:
+            assert again[-1][key] == pytest.approx(first[-1][key], rel=1e-12, abs=1e-15), key
+
+
+def test_a_tolerance_out_of_reach_names_the_users_tolerance_and_the_parts_target():
+    with pytest.raises(ToleranceError) as info:
+        _plan(MPI.COMM_WORLD, 1e-3, {"max_dofs": 300})
+    err = info.value
+    assert err.tolerance == 1e-3 and err.limit == "accuracy.max_dofs"
+    assert err.target is not None and 0.0 < err.target < 1e-3 and err.estimate > err.target
+    # refused from the prediction before any refinement, or, where it is within, by the refinement
+    assert (err.dofs if err.predicted is None else err.predicted) > 300
+    assert "accuracy.tolerance = 0.001 " in str(err)
+
+
+def test_a_tolerance_far_out_of_reach_is_refused_from_the_prediction(monkeypatch):
+    """1e-9 on Example 1 would refine to 10^6 dofs before anything said no; the rates measured on the start meshes
+    predict the dofs it needs: refused there, with no mesh refined."""
+    refined = []
+    monkeypatch.setattr(planner.Planner, "_mesh", lambda self, *a: refined.append(a) or a[3:])
+    with pytest.raises(ToleranceError) as info:
+        _plan(MPI.COMM_WORLD, 1e-9)
+    err = info.value
+    assert not refined and err.limit == "accuracy.max_dofs" and err.predicted > 2_000_000
+    assert "it would need about" in str(err)
+
+
+def test_the_planner_never_grows_a_mesh_past_the_memory(monkeypatch):
+    """The dof limit is the smaller of accuracy.max_dofs and what fits in the memory (here a machine made small by
+    a huge cost per dof)."""
+    monkeypatch.setattr(memory, "BYTES_PER_DOF", memory.BYTES_PER_DOF * 1e7)
+    with pytest.raises(ToleranceError) as info:
+        _plan(MPI.COMM_WORLD, 1e-3)
+    assert info.value.limit.startswith("the memory (")
+
+
+def test_where_the_indicator_grows_the_mesh_is_adapted_to_its_largest_level(monkeypatch, comm):
+    """A growth over GROWTH_AT_0 (here made 0, so that any growth counts) judges u's mesh by runs to the level of
+    largest indicator: the plan says so, and its space estimate is C eta of that level without a growth factor."""
+    lines = []
+    monkeypatch.setattr(planner, "GROWTH_AT_0", 0.0)
+    p = plan(_short().replace({"accuracy": {"tolerance": 3e-3}}), comm, log=lines.append)
+    assert any("level of largest eta" in line for line in lines), lines
+    last = [r for r in p.adaptation if r.degree == p.degree][-1]
+    assert p.estimate.space_u == last.estimate

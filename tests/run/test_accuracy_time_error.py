@@ -1,0 +1,67 @@
+"""solver/run/accuracy/time_error.py: the time part by step doubling."""
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from solver.config import load
+from solver.mesh.geometry import build
+from solver.run.accuracy.scene import start_mesh, with_changes
+from solver.run.accuracy.solves import PilotRun
+from solver.run.accuracy.time_error import N0, SAFETY, choose_step, norms, time_estimate
+from solver.run.model import build_model
+
+
+@pytest.fixture
+def model(comm):
+    cfg = load(ROOT / "configs/example1.toml").replace({"time": {"T": 0.2, "k": 0.1}})
+    cfg = with_changes(cfg, start_mesh(cfg, comm))
+    return build_model(cfg, comm, build(comm, cfg.mesh, cfg.boundaries, cfg.dim))
+
+
+def _runs(model, errors, levels=3):
+    """Runs at k, k/2, k/4 whose u at every level is errors[i] times one field (zeta likewise): their error is
+    errors[i] times that field's norm."""
+    w = np.linspace(0.0, 1.0, model.u.x.array.size)
+    z = np.linspace(1.0, 2.0, model.damage.zeta.x.array.size)
+    out = []
+    for i, e in enumerate(errors):
+        n = (levels - 1) * 2**i + 1
+        out.append(PilotRun(model, [j * 0.1 / 2**i for j in range(n)], [e * w] * n, [e * z] * n))
+    return out, w, z
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_step_doubling_recovers_the_order_and_the_error_of_the_finest_run(comm, model, order):
+    errors = [(1.0 / 2**i) ** order for i in range(3)]  # e = k^p
+    runs, w, z = _runs(model, errors)
+    norm_u, norm_z = norms(model, comm)
+    est = time_estimate(runs, 2, comm)
+    assert est.rate == pytest.approx(order, rel=1e-12)
+    assert est.error == pytest.approx(errors[2] * (norm_u(w) + norm_z(z)), rel=1e-12)
+    assert np.array_equal(est.times, np.array(runs[1].t)) and len(est.profile) == len(runs[1].t)
+
+
+def test_the_order_is_at_most_the_schemes(comm, model):
+    runs, _, _ = _runs(model, [1.0, 1.0 / 4, 1.0 / 16])  # second order, judged for a first-order scheme
+    assert time_estimate(runs, 1, comm).rate == 1.0
+
+
+def test_no_difference_left_is_no_time_error(comm, model):
+    runs, _, _ = _runs(model, [1.0, 1.0, 1.0])
+    est = time_estimate(runs, 2, comm)
+    assert est.error == 0.0 and est.rate == 2.0 and not est.profile.any()
+
+
+def test_the_chosen_step_is_the_largest_within_its_share(comm):
+    cfg = load(ROOT / "configs/example1.toml").replace({"time": {"T": 0.2}})
+    cfg = with_changes(cfg, start_mesh(cfg, comm), {"discretization": {"u_degree": 1, "zeta_degree": 1}})
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    share = 1e-4
+    chosen = choose_step(cfg, comm, geo, 2, share, 1e-3, log=lambda *a: None)
+    assert chosen.k0 == cfg.time.T / N0 and chosen.error <= SAFETY * share
+    j = round(np.log2(chosen.k0 / chosen.k))
+    assert chosen.k == chosen.k0 / 2**j
+    if j > 0:  # the step twice as large would not fit
+        assert chosen.error * 2**chosen.rate > SAFETY * share
+    assert chosen.growth >= 1.0 and 0.0 <= chosen.largest_t <= cfg.time.T
