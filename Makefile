@@ -2,6 +2,7 @@
 #   make demo   - install if needed, run the built-in default scene (Example 1)
 #   make test   - install if needed: the layering check, the test suite (serial, then mpirun -n 2; the demos too), a wheel install
 #   make test-portable - the numerics-sensitive tests again on netlib's reference BLAS and on another OpenBLAS kernel
+#   make check-slurm - as root: a one-node Slurm runs docs/install/cluster.md's job script past its time limit
 #   make docs   - install the docs extra if needed, build the site (docs/ -> docs/_build/html), warnings as errors
 # Installing: Debian packages (dolfinx 0.5.2 stack) with apt-get, then a virtual
 # environment made from Debian's interpreter with --system-site-packages, into
@@ -29,7 +30,7 @@ export OMPI_MCA_rmaps_base_oversubscribe := 1
 MPIRUN := mpirun -n 2
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install system-packages demo test test-serial test-mpi test-portable lint layers docs clean
+.PHONY: install system-packages demo test test-serial test-mpi test-portable check-slurm lint layers docs clean
 
 install: .venv/.installed
 
@@ -88,6 +89,11 @@ test-portable: install
 	@echo "== OpenBLAS with the $(OTHER_CORETYPE) kernels"
 	OPENBLAS_CORETYPE=$(OTHER_CORETYPE) $(PY) scripts/which_blas.py
 	OPENBLAS_CORETYPE=$(OTHER_CORETYPE) $(PYTEST_PORTABLE)
+
+# the cluster route (docs/install/cluster.md) under a real one-node Slurm, stopped by its time limit, requeued,
+# continued with --restart to the uninterrupted result; installs slurm-wlm and munge (apt-get), needs root
+check-slurm: install
+	$(SUDO) bash scripts/check-slurm.sh
 
 # the layers of solver/ point one way (contracts in pyproject.toml's [tool.importlinter])
 layers: install
