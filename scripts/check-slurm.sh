@@ -46,6 +46,8 @@ stop_daemons() {
   done
 }
 trap stop_daemons EXIT
+trap 'exit 130' INT   # so that the EXIT trap stops the daemons on a signal too
+trap 'exit 143' TERM
 if ! pgrep -u munge -x munged >/dev/null; then
   runuser -u munge -- /usr/sbin/munged
   started+=(/run/munge/munged.pid)
