@@ -18,7 +18,8 @@
 # (any uid, root included: mpirun is allowed to run as root, and the compiled-form cache is shared).
 # A slim image without the plotting stack (no matplotlib, pyvista/VTK; `plot` says so):
 #   docker build --build-arg PLOTS=0 -t campo-solver:slim .
-# Behind a TLS-intercepting proxy, give its CA certificate (PEM) to the build:
+# Behind a TLS-intercepting proxy, give its CA certificate (PEM; one or a few certificates, not a whole CA
+# bundle: a build argument reaches RUN as an environment variable, which holds at most 128 KiB) to the build:
 #   docker build --build-arg EXTRA_CA_CERT="$(cat proxy-ca.pem)" -t campo-solver .
 # Tests inside the image:
 #   docker run --rm --entrypoint python campo-solver -m pytest -q -m "not slow"
@@ -29,15 +30,17 @@
 FROM debian:bookworm
 
 ARG DEBIAN_FRONTEND=noninteractive
-# PLOTS=0: no plotting stack (see the Makefile); EXTRA_CA_CERT: a CA certificate (PEM text) to trust,
+# PLOTS=0: no plotting stack (see the Makefile); EXTRA_CA_CERT: one or a few CA certificates (PEM text) to trust,
 # for builds behind a TLS-intercepting proxy (apt and pip both use the system store then)
 ARG PLOTS=1
 ARG EXTRA_CA_CERT=""
 
-# make runs the Makefile; ca-certificates lets pip reach PyPI over https
+# make runs the Makefile; ca-certificates lets pip reach PyPI over https. Each apt layer ends with apt-get clean
+# and without the lists: the downloaded .debs and the indexes would stay in the layer (a base image made with
+# debootstrap has no docker-clean hook that drops them)
 RUN apt-get update -qq \
  && apt-get install -y -qq --no-install-recommends make ca-certificates \
- && rm -rf /var/lib/apt/lists/* \
+ && apt-get clean && rm -rf /var/lib/apt/lists/* \
  && if [ -n "$EXTRA_CA_CERT" ]; then \
         printf '%s\n' "$EXTRA_CA_CERT" > /usr/local/share/ca-certificates/extra-ca.crt && update-ca-certificates; \
     fi
@@ -47,7 +50,7 @@ WORKDIR /opt/solver
 # Debian packages first (a layer that only changes with the Makefile)
 COPY Makefile ./
 RUN make system-packages PLOTS=$PLOTS \
- && rm -rf /var/lib/apt/lists/*
+ && apt-get clean && rm -rf /var/lib/apt/lists/*
 
 RUN useradd --create-home --uid 1000 --user-group --shell /bin/bash solver \
  && chown solver:solver /opt/solver

@@ -1,7 +1,14 @@
 #!/usr/bin/env bash
-# Proves the Dockerfile's install steps on a fresh Debian bookworm, without Docker.
+# Builds and tests the image with podman or docker where one runs, and proves the Dockerfile's install steps on a
+# fresh Debian bookworm without one (a chroot replay).
 #
-#   sudo bash scripts/check-image.sh [--fresh] [--keep-mounts]
+#   sudo bash scripts/check-image.sh [--engine auto|podman|docker|chroot] [--fresh] [--keep-mounts]
+#
+# --engine auto (the default): podman if `podman info` works, else docker if `docker info` does (a docker CLI
+# without a daemon does not), else the chroot replay; the log says which and why. Steps 1-3 serve both routes;
+# with an engine, 4-7 are scripts/check-image-engine.sh's: build the image (FROM pulled, or the debootstrapped
+# root imported as debian:bookworm where no registry answers), run the scene as uid 1000 and as root, the tests,
+# mpirun -n 2, and print the image's size. Without one:
 #
 # 1. host:        installs debootstrap on the host if it is missing (apt-get)
 # 2. debootstrap: makes a minimal bookworm root ("debootstrap --variant=minbase",
@@ -28,14 +35,16 @@
 # The debs downloaded by apt are kept in $SOLVER_IMAGE_ROOT/apt-archives between runs.
 set -euo pipefail
 
-usage() { sed -n '2,29s/^# \{0,1\}//p' "$0"; }
+usage() { sed -n '2,38s/^# \{0,1\}//p' "$0"; }
 
 FRESH=0
 KEEP_MOUNTS=0
+ENGINE=auto
 while [ $# -gt 0 ]; do
   case "$1" in
     --fresh) FRESH=1 ;;
     --keep-mounts) KEEP_MOUNTS=1 ;;
+    --engine) shift; ENGINE=${1:-} ;;
     -h|--help) usage; exit 0 ;;
     *) echo "check-image: unknown argument: $1" >&2; usage >&2; exit 2 ;;
   esac
@@ -177,6 +186,25 @@ SECURITY_MIRROR=${SECURITY_MIRROR:-http://deb.debian.org/debian-security}
 echo "check-image: project $PROJECT, Dockerfile $DOCKERFILE, cache $CACHE" >&2
 echo "check-image: mirror $MIRROR (security: $SECURITY_MIRROR)" >&2
 
+# ---------------------------------------------------------------- 0. which engine
+case "$ENGINE" in
+  auto)
+    ENGINE=chroot
+    probe=$(mktemp)
+    if ! command -v podman >/dev/null; then echo "check-image: no podman" >&2
+    elif podman --runtime runc info >/dev/null 2>"$probe"; then ENGINE=podman
+    else echo "check-image: podman does not run: $(tail -n1 "$probe")" >&2; fi
+    if [ "$ENGINE" = chroot ]; then
+      if ! command -v docker >/dev/null; then echo "check-image: no docker" >&2
+      elif docker info >/dev/null 2>"$probe"; then ENGINE=docker
+      else echo "check-image: docker does not run: $(grep -m1 -i 'cannot\|error' "$probe")" >&2; fi
+    fi
+    rm -f "$probe" ;;
+  podman|docker|chroot) ;;
+  *) echo "check-image: --engine must be auto, podman, docker or chroot, not '$ENGINE'" >&2; exit 2 ;;
+esac
+echo "check-image: route: $ENGINE" >&2
+
 # ---------------------------------------------------------------- 1. host
 phase_begin "host: debootstrap installed"
 if ! command -v debootstrap >/dev/null 2>&1; then
@@ -298,6 +326,12 @@ if git -c safe.directory='*' -C "$PROJECT" rev-parse --is-inside-work-tree >/dev
   done < <(git -c safe.directory='*' -C "$PROJECT" ls-files -z --others --ignored --exclude-standard --directory)
 fi
 phase_end ok
+
+if [ "$ENGINE" != chroot ]; then
+  # shellcheck source=scripts/check-image-engine.sh
+  source "$PROJECT/scripts/check-image-engine.sh"
+  exit 0
+fi
 
 # ---------------------------------------------------------------- 4. the Dockerfile
 declare -A ENVS=([PATH]=$DEFAULT_PATH)   # the image's ENV (debian:bookworm sets PATH)
