@@ -31,13 +31,12 @@ def _equal(a: np.ndarray, b: np.ndarray) -> bool:
 class StrainMap:
     """E: u's dofs -> the d(d+1)/2 independent components of eps(u) at the rule's points (one block of ``size_q`` rows
     per component, as :class:`MemorySource` orders them), and its transpose, from a table of the scalar basis
-    gradients per cell and point instead of a stored sparse matrix. In 3-D the sparse E held 36 entries of 12
-    bytes per P1 tetrahedron, 0.83 KB per displacement dof, the largest array of a 3-D run (issue 30); the table
-    holds 12 doubles, 0.2 KB per dof. A product costs 2.2 (E u) and 2.6 (E^T m) times the sparse one (14 and 19 ms
-    against 6.5 and 7 ms at 107,811 dofs, one of each per step), so 2-D, where E is small and the steps are short,
-    keeps the sparse matrix. The cells are taken in blocks of BLOCK (16 MB of temporaries); each component's
-    transposed sum is a bincount over the nodes (the dof index arithmetic cost as much as the sum). ``E @ u`` and
-    ``E.T @ m`` read as the matrix's did (the sums in another order: round-off)."""
+    gradients per cell and point instead of a stored sparse matrix: in 3-D the matrix would be the largest array
+    of a run, the table a quarter of it, for products a little over twice as slow; 2-D, where E is small and the
+    steps are short, keeps the sparse matrix (docs/benchmarks/performance.md). The cells are taken in blocks of
+    BLOCK (16 MB of temporaries); each component's transposed sum is a bincount over the nodes (the dof index
+    arithmetic costs as much as the sum). ``E @ u`` and ``E.T @ m`` read as the matrix's do (the sums in another
+    order: round-off)."""
 
     BLOCK = 65536
 
@@ -180,7 +179,7 @@ class MemorySource:
         bs = V.dofmap.index_map_bs
         size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
         self.pairs = pairs(d)
-        if d == 3:  # the table, not the matrix (StrainMap: 0.2 KB per dof instead of 0.83)
+        if d == 3:  # the table, not the matrix (StrainMap: a quarter of its memory)
             self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
         else:
             self.strain_operator = sparse_strain_operator(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
@@ -293,17 +292,16 @@ def point_weights(rule: QuadratureRule, source: MemorySource) -> np.ndarray:
 class MemoryForce:
     """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one product with E^T.
 
-    Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
-    P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
-    at n = 64, measured; a third of the step). It is also E^T W m: with w_q |J_K| the weight
+    Assembled, B maps the quadrature space to u's dofs with every point's d*d components, 48 entries per P2
+    point, read at every step (docs/benchmarks/performance.md). It is also E^T W m: with w_q |J_K| the weight
     of each point of an owned cell (0 on ghost cells, whose owners add their part),
     (M, eps(w)) = sum_q w_q |J_K| (sum_i M_ii eps_ii(w) + sum_{i<j} (M_ij + M_ji) eps_ij(w)), so
     m holds M's diagonal components and the sums of its off-diagonal pairs (M need not be
     symmetric), and E is the source's strain operator of the independent components
     (:class:`MemorySource`), applied transposed: 24 entries per P2 point, where the full-tensor operator
     has 36 and the assembled B 48. W m is formed in m's own buffer and E^T (W m) is, in 2-D, scipy's product
-    with the transposed view of E (a CSC view of the same arrays: no second operator is stored; holding
-    E^T W apart cost 0.38 KB per 3-D dof, issue 30), in 3-D :class:`StrainMap`'s transposed product. It runs on
+    with the transposed view of E (a CSC view of the same arrays: no second operator is stored), in 3-D
+    :class:`StrainMap`'s transposed product. It runs on
     the local arrays, followed by one reverse scatter. Equal to B M to round-off (tested).
     """
 

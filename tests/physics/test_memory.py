@@ -227,7 +227,7 @@ def test_trapezoid_needs_newton():
 
 @pytest.mark.parametrize("rule", ["trapezoid", "trapezoid_extrapolated"])
 def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
-    """M_0 = 0: level 0 does not depend on the rule or on k (the implicit trapezoid once added its term there)."""
+    """M_0 = 0: level 0 does not depend on the rule or on k: the implicit trapezoid's current term has weight 0 there."""
     from conftest import ROOT
 
     from solver.config import load
@@ -247,7 +247,7 @@ def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
 def test_extrapolated_current_term_is_its_definition(comm, model_name):
     """time.order = 2, P2: after level n >= 2, M_n = P_n + (k/2) g(0) zeta_n Phi_L(A eps(u*)), u* = 2 u_{n-1} - u_{n-2},
     against the UFL definition with the truncation acting; in plane strain M_33 likewise with (A eps)_33 =
-    lambda tr eps (the extrapolated term was once never set there: M stayed 0)."""
+    lambda tr eps, set as well (M_33 not left at 0)."""
     from conftest import ROOT
 
     from solver.config import load
