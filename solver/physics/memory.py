@@ -264,7 +264,8 @@ def trapezoid_term(history: PronyHistory, integrand: MemoryIntegrand, zeta):
     rule's points, weighted by the history's ``current_weight`` (which the history's commit sets)."""
 
     if history.current_weight is None:
-        raise ValueError(f"a {history.sum_rule.name} history has no implicit current-level term")
+        rule = history.sum_rule.name if isinstance(history, PronyHistory) else "tabulated"
+        raise ValueError(f"a {rule} history has no implicit current-level term (only the implicit trapezoid's has)")
     weight, dx = history.current_weight, history.rule.dx
 
     def term(u, w):
