@@ -11,7 +11,7 @@ from solver.config.time import TimeScheme, memory_rule
 from solver.run.model import build_model
 from solver.run.scheme import FirstOrderScheme, SecondOrderScheme, level_scheme
 
-SCENE = {"mesh": {"nx": 3, "ny": 3}, "time": {"T": 0.2, "k": 0.1}}
+SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.2, "k": 0.1}}
 
 
 @pytest.mark.parametrize("order,kernel,rule,want", [
