@@ -5,6 +5,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from solver.errors import ConfigError
+from solver.laws.damage import FremondSource
+
 from .fields import Ctx, boolean, check_keys, names, need, number
 
 
@@ -22,6 +25,11 @@ class DamageConfig:
     zeta0: float = 1.0
     clip: bool = True
 
+    @property
+    def law(self) -> FremondSource:
+        """Fremond's source phi with this section's parameters (the law the damage step assembles)."""
+        return FremondSource(self.lambda1, self.lambda2, self.lambda3, self.zeta_star, self.q_star)
+
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> DamageConfig:
     t = check_keys(ctx, "damage", t, names(DamageConfig))
@@ -31,12 +39,12 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> DamageConfig:
     clip = boolean(ctx, "damage.clip", v["clip"])
     num = {f: number(ctx, f"damage.{f}", v[f]) for f in names(DamageConfig) if f not in ("enabled", "clip")}
     need(ctx, "damage.kappa", num["kappa"], num["kappa"] >= 0, "must be >= 0")
-    need(ctx, "damage.zeta_star", num["zeta_star"], 0 < num["zeta_star"] < 1, "must be in (0, 1)")
+    try:  # the law checks its own parameters
+        FremondSource(num["lambda1"], num["lambda2"], num["lambda3"], num["zeta_star"], num["q_star"])
+    except ConfigError as exc:
+        raise ctx.fail(f"damage.{exc.key}", exc.value, exc.allowed) from None
     need(ctx, "damage.zeta0", num["zeta0"], num["zeta_star"] <= num["zeta0"] <= 1,
          f"must be in [zeta_star = {num['zeta_star']}, 1]")
-    need(ctx, "damage.q_star", num["q_star"], num["q_star"] > 0, "must be > 0")
-    for key in ("lambda1", "lambda2", "lambda3"):
-        need(ctx, f"damage.{key}", num[key], num[key] >= 0, "must be >= 0")
     return DamageConfig(enabled=enabled, clip=clip, **num)
 
 

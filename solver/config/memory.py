@@ -5,7 +5,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from solver.errors import ConfigError
+from solver.laws.memory import MemoryIntegrand
+
 from .fields import Ctx, check_keys, names, need, number, string, vector
+from .time import PRONY_KERNELS, memory_rule
 
 KERNELS = ("none", "constant", "exponential", "tabulated")
 RULES = ("auto", "left", "trapezoid", "trapezoid_extrapolated")
@@ -23,7 +27,8 @@ class MemoryConfig:
     ``rule``: ``left``, the paper's left-rectangle sum; ``trapezoid``, the trapezoidal rule implicit
     in the current level (Newton only, one factorization per step); ``trapezoid_extrapolated``, the
     trapezoidal rule with the current level's u extrapolated from the two before (explicit: no
-    refactorization); ``auto``: left for ``time.order = 1``, trapezoid_extrapolated for 2.
+    refactorization); ``auto``: left for ``time.order = 1``, trapezoid_extrapolated for 2
+    (:func:`solver.config.time.memory_rule`, resolved by the loader).
     """
 
     kernel: str = "constant"
@@ -40,9 +45,8 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     kernel = string(ctx, "memory.kernel", t.get("kernel", d.kernel), KERNELS)
     rule = string(ctx, "memory.rule", t.get("rule", d.rule), RULES)
     order = scene["time"].order
-    if rule == "auto":
-        rule = "trapezoid_extrapolated" if order == 2 and kernel in ("constant", "exponential") else "left"
-    if rule in SECOND_ORDER_RULES and kernel not in ("constant", "exponential"):
+    rule = memory_rule(order, kernel, rule)
+    if rule in SECOND_ORDER_RULES and kernel not in PRONY_KERNELS:
         raise ctx.fail("memory.rule", rule, "the trapezoidal rules are for constant and exponential kernels")
     if order == 2 and kernel == "tabulated":
         raise ctx.fail("memory.kernel", kernel, "time.order = 2 needs a constant or exponential kernel "
@@ -50,7 +54,10 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     if order == 2 and rule == "left" and kernel != "none":
         raise ctx.fail("memory.rule", rule, "time.order = 2 needs a second-order rule: trapezoid or trapezoid_extrapolated")
     L = number(ctx, "memory.L", t.get("L", d.L))
-    need(ctx, "memory.L", L, L > 0, "must be > 0")
+    try:  # the law checks its own parameter
+        MemoryIntegrand.check_truncation(L)
+    except ConfigError as exc:
+        raise ctx.fail(f"memory.{exc.key}", exc.value, exc.allowed) from None
     for key in ("weights", "times", "table"):
         if key in t and key not in _USES[kernel]:
             raise ctx.fail(f"memory.{key}", t[key], f"not used by kernel '{kernel}'")

@@ -1,4 +1,8 @@
-"""[time]: uniform steps k on [0, T] and the order of the time scheme (docs/model.md §3.4, §3.7)."""
+"""[time]: uniform steps k on [0, T] and the order of the time scheme (docs/model.md §3.4, §3.7).
+
+:class:`TimeScheme` is where the order's choices are made, once: the memory rule, the damage step and the
+start-up step. The loader resolves ``memory.rule = "auto"`` with :func:`memory_rule`, the same decision.
+"""
 
 from __future__ import annotations
 
@@ -22,6 +26,41 @@ class TimeConfig:
     @property
     def steps(self) -> int:
         return int(round(self.T / self.k))
+
+
+PRONY_KERNELS = ("constant", "exponential")  # kernels with a recursive history, the only ones a trapezoid fits
+
+
+def memory_rule(order: int, kernel: str, rule: str) -> str:
+    """The memory sum's rule in time: ``rule`` itself unless ``auto``, which is the left-rectangle sum for order 1
+    (and for kernels without a recursion) and the extrapolated trapezoid for order 2 (docs/model.md §3.4, §3.7)."""
+    if rule != "auto":
+        return rule
+    return "trapezoid_extrapolated" if order == 2 and kernel in PRONY_KERNELS else "left"
+
+
+@dataclass(frozen=True)
+class TimeScheme:
+    """The time scheme of a scene, decided once from its config (docs/model.md §3.2, §3.4, §3.7).
+
+    ``memory_rule``: the memory sum's rule (left | trapezoid | trapezoid_extrapolated); ``damage_scheme``:
+    the damage step (explicit | semi_implicit, order 1's ``solver.damage_scheme``; cnab2 for order 2);
+    ``heun_start``: level 1 is Heun's predictor-corrector, since order 2's AB2 source and extrapolated u need
+    two past levels (only where there is such a source or extrapolation to correct).
+    """
+
+    order: int
+    memory_rule: str
+    damage_scheme: str
+    heun_start: bool
+
+    @classmethod
+    def decide(cls, order: int, kernel: str, rule: str, damage: bool, damage_scheme: str) -> TimeScheme:
+        """From ``time.order``, ``memory.kernel``, ``memory.rule``, ``damage.enabled``, ``solver.damage_scheme``."""
+        resolved = memory_rule(order, kernel, rule)
+        extrapolated = kernel in PRONY_KERNELS and resolved == "trapezoid_extrapolated"
+        second = order == 2
+        return cls(order, resolved, "cnab2" if second else damage_scheme, second and (damage or extrapolated))
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> TimeConfig:

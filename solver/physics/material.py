@@ -1,10 +1,14 @@
 """Constitutive functions as pure UFL (docs/model.md §2): elasticity A, its out-of-plane stress in plane strain,
-truncation Phi_L, von Mises."""
+von Mises; the truncation Phi_L is the memory law's (:mod:`solver.laws.memory`, re-exported here)."""
 
 from __future__ import annotations
 
 import numpy as np
 import ufl
+
+from solver.laws.memory import truncate
+
+__all__ = ["elasticity", "lame", "out_of_plane_stress", "strain", "truncate", "von_mises", "von_mises_array"]
 
 
 def lame(E: float, nu: float, model: str) -> tuple[float, float]:
@@ -25,12 +29,6 @@ def elasticity(eps, E: float, nu: float, model: str) -> ufl.core.expr.Expr:
     lam, mu = lame(E, nu, model)
     d = eps.ufl_shape[0]
     return lam * ufl.tr(eps) * ufl.Identity(d) + 2.0 * mu * eps
-
-
-def truncate(tau, L: float) -> ufl.core.expr.Expr:
-    """Componentwise truncation Phi_L(tau)_ij = max(-L, min(L, tau_ij))."""
-    n, m = tau.ufl_shape
-    return ufl.as_matrix([[ufl.max_value(-L, ufl.min_value(L, tau[i, j])) for j in range(m)] for i in range(n)])
 
 
 def out_of_plane_stress(eps, E: float, nu: float) -> ufl.core.expr.Expr:

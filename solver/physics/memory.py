@@ -9,9 +9,11 @@ kernel g(s) = sum_i c_i exp(-s / tau_i) (tau = inf: the constant kernel) it is
 the recursion M_n^i = exp(-k / tau_i) (M_{n-1}^i + k c_i H_{n-1}): no past is
 stored. Only a tabulated (general) kernel keeps every H_m.
 
-The history is committed once per step, after the step has converged. The trapezoidal
-rule (``memory.rule = "trapezoid"``) adds the current level's (k/2) g(0) H_n, implicit in
-u_n: :func:`trapezoid_term` gives that term of the displacement residual. With
+H is the law :class:`solver.laws.memory.MemoryIntegrand`, evaluated at the points by
+:mod:`solver.physics.memory_source`. The history is committed once per step, after the step has
+converged. The trapezoidal rule (``memory.rule = "trapezoid"``) adds the current level's
+(k/2) g(0) H_n, implicit in u_n: :func:`trapezoid_term` gives that term of the displacement
+residual, weighted by the history's own ``current_weight``. With
 ``trapezoid_extrapolated`` (the default of ``time.order = 2``) H_n is evaluated at
 u* = 2 u_{n-1} - u_{n-2} instead (:meth:`PronyHistory.extrapolate`): an O(k^3) change per
 level that keeps the Jacobian, and its factorization, independent of zeta_n.
@@ -28,7 +30,8 @@ from dolfinx import fem
 from petsc4py import PETSc
 
 from solver.config import MemoryConfig
-from solver.physics.material import strain, truncate
+from solver.laws.memory import MemoryIntegrand, truncate
+from solver.physics.material import strain
 from solver.physics.quadrature import QuadratureRule, all_finite
 
 
@@ -36,7 +39,8 @@ class History:
     """Base: the memory tensor M (a quadrature function) and its update after a step."""
 
     M: fem.Function
-    extrapolated = False  # True: the current level's term is set by set_current() before the displacement solve
+    extrapolated = False  # True: the current level's term is set by extrapolate() before the displacement solve
+    current_weight: fem.Constant | None = None  # the implicit trapezoid's weight of the current level's term
 
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
@@ -70,16 +74,26 @@ class SumRule:
     first_weight: float
     extrapolated: bool = False
 
+    @property
+    def implicit(self) -> bool:
+        """Whether the current level's term is implicit in u_n (the displacement form carries it)."""
+        return self.first_weight != 1.0 and not self.extrapolated
+
 
 LEFT = SumRule("left", 1.0)
 TRAPEZOID = SumRule("trapezoid", 0.5)
 TRAPEZOID_EXTRAPOLATED = SumRule("trapezoid_extrapolated", 0.5, extrapolated=True)
-SUM_RULES = {r.name: r for r in (LEFT, TRAPEZOID, TRAPEZOID_EXTRAPOLATED)}
-SUM_RULES["auto"] = LEFT  # a MemoryConfig made directly, not resolved by the loader: order 1's rule
+SUM_RULES = {r.name: r for r in (LEFT, TRAPEZOID, TRAPEZOID_EXTRAPOLATED)}  # by the TimeScheme's memory_rule
 
 
 class PronyHistory(History):
-    """Prony series (constant kernel: one term with tau = inf), updated recursively."""
+    """Prony series (constant kernel: one term with tau = inf), updated recursively.
+
+    ``source`` evaluates H at the rule's points (:class:`solver.physics.memory_source.MemorySource`); with an
+    extrapolated rule it should keep two strains (``keep=2``), which :meth:`extrapolate` reads again.
+    ``current_weight``: with the implicit trapezoid, the weight (k/2) g(0) of the current level's term as a
+    constant of the displacement form (0 at level 0, where M_0 = 0; set by :meth:`commit`); None otherwise.
+    """
 
     def __init__(self, rule: QuadratureRule, source, weights, times, k: float,
                  sum_rule: SumRule = LEFT) -> None:
@@ -89,11 +103,9 @@ class PronyHistory(History):
         self.sum_rule = sum_rule
         extrapolated = self.extrapolated = sum_rule.extrapolated
         self.P = np.zeros_like(self.M.x.array) if extrapolated else None
-        if extrapolated:  # H(u*) from the strains of u_{n-1} and u_{n-2}, kept by the source
-            source.retain(2)
         self._sum: float | None = None  # the sum of M, taken where M was last written (still in cache)
-        # the implicit trapezoid's weight (k/2) g(0) of the current level: 0 at level 0 (M_0 = 0), set by commit()
-        self.current_weight: fem.Constant | None = None
+        # a constant, not a number: not compiled into the form
+        self.current_weight = fem.Constant(rule.mesh, PETSc.ScalarType(0.0)) if sum_rule.implicit else None
         self.g0 = float(np.sum(weights))
         self.k = k
         taus = list(times) if times else [math.inf] * len(weights)
@@ -227,35 +239,36 @@ class PlaneStrainHistory(History):
 
 
 def memory_source(u, zeta, A, L: float):
-    """H = zeta Phi_L(A eps(u)): what the kernel integrates."""
+    """H = zeta Phi_L(A eps(u)) for an elasticity map A (UFL); :meth:`MemoryIntegrand.ufl` is the law's own form."""
 
     return zeta * truncate(A(strain(u)), L)
 
 
-def make_history(cfg: MemoryConfig, rule: QuadratureRule, source, k: float, steps: int) -> History | None:
+def make_history(cfg: MemoryConfig, sum_rule: str, rule: QuadratureRule, source, k: float,
+                 steps: int) -> History | None:
     """The cheapest exact history for the kernel: None, a recursion, or the full past.
 
+    ``sum_rule``: the rule in time the scene's :class:`solver.config.time.TimeScheme` chose (a Prony kernel's).
     ``source`` evaluates H at the rule's points (:mod:`solver.physics.memory_source`): the quadrature
-    space ``Q``, ``source(out, scale, base)`` -> base + scale H, ``extrapolated(u_prev, ...)`` and
-    ``retain(count)``.
+    space ``Q``, ``source(out, scale, base)`` -> base + scale H and ``extrapolated(u_prev, ...)``.
     """
     if cfg.kernel == "none":
         return None
     if cfg.kernel in ("constant", "exponential"):
-        return PronyHistory(rule, source, cfg.weights, cfg.times, k, SUM_RULES[cfg.rule])
+        return PronyHistory(rule, source, cfg.weights, cfg.times, k, SUM_RULES[sum_rule])
     return TabulatedHistory(rule, source, cfg.table, k, steps)
 
 
-def trapezoid_term(history: PronyHistory, zeta, A, L: float):
-    """(u, w) -> the trapezoid's current-level term (k/2) g(0) (zeta_n Phi_L(A eps(u_n)), eps(w)) over the rule's points."""
+def trapezoid_term(history: PronyHistory, integrand: MemoryIntegrand, zeta):
+    """(u, w) -> the implicit trapezoid's current-level term (k/2) g(0) (zeta_n Phi_L(A eps(u_n)), eps(w)) over the
+    rule's points, weighted by the history's ``current_weight`` (which the history's commit sets)."""
 
-    rule = history.rule
-    # a constant, not a number: not compiled into the form, and 0 at level 0, where M_0 = 0 (the history's commit
-    # sets it to (k/2) g(0) from level 1 on)
-    history.current_weight = fem.Constant(rule.mesh, PETSc.ScalarType(0.0))
+    if history.current_weight is None:
+        rule = history.sum_rule.name if isinstance(history, PronyHistory) else "tabulated"
+        raise ValueError(f"a {rule} history has no implicit current-level term (only the implicit trapezoid's has)")
+    weight, dx = history.current_weight, history.rule.dx
 
     def term(u, w):
-        H = memory_source(u, zeta, A, L)
-        return history.current_weight * ufl.inner(H, strain(w)) * rule.dx
+        return weight * ufl.inner(integrand.ufl(strain(u), zeta), strain(w)) * dx
 
     return term

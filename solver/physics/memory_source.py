@@ -1,9 +1,9 @@
 """The fast evaluation of the memory's integrand H = zeta Phi_L(A eps(u)) and of its force on the nodes.
 
-The definition is the UFL expression :func:`solver.physics.memory.memory_source`; here it is
-evaluated as products with the strain operator E and numpy passes over the compact strain components (tested equal
-to the definition), with the pieces that share the strain: the out-of-plane H_33 of plane strain,
-the strain norm of the diagnostics, and B M = (M, eps(w)) from the same strain operator.
+The law is :class:`solver.laws.memory.MemoryIntegrand`, its UFL form the definition and its numpy form the one used
+here, on the compact strain components that one product with the strain operator E gives (2-D: a sparse matrix;
+3-D: :class:`StrainMap`, the same product from a table), with the pieces that share the strain: the out-of-plane
+H_33 of plane strain, the strain norm of the diagnostics, and B M = (M, eps(w)) from the same strain operator.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from solver.laws.memory import MemoryIntegrand, pairs
 from solver.physics.quadrature import QuadratureRule
 
 
@@ -30,13 +31,12 @@ def _equal(a: np.ndarray, b: np.ndarray) -> bool:
 class StrainMap:
     """E: u's dofs -> the d(d+1)/2 independent components of eps(u) at the rule's points (one block of ``size_q`` rows
     per component, as :class:`MemorySource` orders them), and its transpose, from a table of the scalar basis
-    gradients per cell and point instead of a stored sparse matrix. In 3-D the sparse E held 36 entries of 12
-    bytes per P1 tetrahedron, 0.83 KB per displacement dof, the largest array of a 3-D run (issue 30); the table
-    holds 12 doubles, 0.2 KB per dof. A product costs 2.2 (E u) and 2.6 (E^T m) times the sparse one (14 and 19 ms
-    against 6.5 and 7 ms at 107,811 dofs, one of each per step), so 2-D, where E is small and the steps are short,
-    keeps the sparse matrix. The cells are taken in blocks of BLOCK (16 MB of temporaries); each component's
-    transposed sum is a bincount over the nodes (the dof index arithmetic cost as much as the sum). ``E @ u`` and
-    ``E.T @ m`` read as the matrix's did (the sums in another order: round-off)."""
+    gradients per cell and point instead of a stored sparse matrix: in 3-D the matrix would be the largest array
+    of a run, the table a quarter of it, for products a little over twice as slow; 2-D, where E is small and the
+    steps are short, keeps the sparse matrix (docs/benchmarks/performance.md). The cells are taken in blocks of
+    BLOCK (16 MB of temporaries); each component's transposed sum is a bincount over the nodes (the dof index
+    arithmetic costs as much as the sum). ``E @ u`` and ``E.T @ m`` read as the matrix's do (the sums in another
+    order: round-off)."""
 
     BLOCK = 65536
 
@@ -135,25 +135,24 @@ class MemorySource:
     Expression with a trial function) into ``strain_operator``, E, which gives the d(d+1)/2 independent components
     of the symmetric strain (xx, yy[, zz], then xy[, yz, xz]), one block of rows per component: in 2-D a sparse
     matrix (24 entries per point for P2 triangles, where the full d*d tensor took 36), in 3-D the table itself
-    (:class:`StrainMap`, a quarter of the matrix's memory). zeta at the points is a second, small product. A eps,
-    the truncation (skipped when no value reaches L: it is then the identity) and the factor zeta act on the
-    compact components; only the result is written out in the quadrature space's d*d layout. Equal to the UFL
-    expression ``memory_source`` (tested), which remains the definition.
+    (:class:`StrainMap`, a quarter of the matrix's memory); both answer ``E @ u`` and ``E.T @ m``. zeta at the
+    points is a second, small product. The law's numpy form (:meth:`MemoryIntegrand.compact`) acts on the compact
+    components; only the result is written out in the quadrature space's d*d layout.
 
     The strain is linear in u, so H at an extrapolated u* = 2 u - u_prev follows from the
-    strains of u and u_prev (:meth:`extrapolated`): with ``keep`` > 0 the last ``keep``
-    strains of the field's values are kept, each with a copy of the values it belongs to, and
-    reused when asked for the same values again (an exact comparison: after a restart, or for
-    a u that changed, they are computed again).
+    strains of u and u_prev (:meth:`extrapolated`). ``keep``, set by the owner: how many of the last strains of
+    the field's values are kept, each with a copy of the values it belongs to, and reused when asked for the
+    same values again (an exact comparison: after a restart, or for a u that changed, they are computed again).
+    1 lets the strain norm, H_33 and the next commit share u_n's strain; 2 also keeps u_{n-1}'s for the
+    extrapolated trapezoid. A strain not kept is computed again: the same values, at the cost of a product.
     """
 
-    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, lame_lambda: float, lame_mu: float,
-                 L: float, keep: int = 0) -> None:
+    def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, integrand: MemoryIntegrand,
+                 keep: int = 0) -> None:
 
         d = rule.mesh.geometry.dim
         self.Q = rule.space((d, d))
-        self.u, self.zeta, self.truncation, self.d = u, zeta, L, d
-        self.lame_lambda, self.lame_mu = lame_lambda, lame_mu  # A's Lame constants (not the compliance mu)
+        self.u, self.zeta, self.integrand, self.d = u, zeta, integrand, d
         self.keep = keep
         self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
         cells = rule.cells
@@ -179,8 +178,8 @@ class MemorySource:
         nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
         bs = V.dofmap.index_map_bs
         size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
-        self.pairs = [(i, i) for i in range(d)] + [(i, j) for i in range(d) for j in range(i + 1, d)]
-        if d == 3:  # the table, not the matrix (StrainMap: 0.2 KB per dof instead of 0.83)
+        self.pairs = pairs(d)
+        if d == 3:  # the table, not the matrix (StrainMap: a quarter of its memory)
             self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
         else:
             self.strain_operator = sparse_strain_operator(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
@@ -195,11 +194,6 @@ class MemorySource:
             c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
             nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
             self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
-
-    def retain(self, count: int) -> None:
-        """Keep at least the last ``count`` strains of the field's own values: a consumer that reads a committed
-        strain again (the strain norm, H_33, the extrapolation's u_{n-2}) asks for it here, once."""
-        self.keep = max(self.keep, count)
 
     def forget(self) -> None:
         """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
@@ -244,16 +238,7 @@ class MemorySource:
                 base: np.ndarray | None = None) -> np.ndarray:
         """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
         d = self.d
-        a = np.multiply(eps, 2.0 * self.lame_mu, out=self._a)  # A eps = 2 mu eps + lambda tr(eps) I
-        tr = np.add(eps[0], eps[1], out=self._trace)
-        for i in range(2, d):
-            tr += eps[i]
-        tr *= self.lame_lambda
-        a[:d] += tr
-        if a.max() > self.truncation or a.min() < -self.truncation:  # the truncation acts (NaN: skipped, and kept, like clip's)
-            np.clip(a, -self.truncation, self.truncation, out=a)
-        z = self.zeta_at_points()
-        a *= z * scale if scale != 1.0 else z
+        a = self.integrand.compact(eps, self.zeta_at_points(), self._a, self._trace, scale)
         if out is None:
             out = np.empty(self.size_q * d * d)
         full = out.reshape(-1, d * d)
@@ -277,7 +262,6 @@ class PointStrainNorm:
 
     def __init__(self, source: MemorySource, weights: np.ndarray) -> None:
         self.source, self.weights = source, weights
-        source.retain(1)
         self.factors = [1.0 if i == j else 2.0 for i, j in source.pairs]  # eps_ij = eps_ji counted twice
         self.comm = source.u.function_space.mesh.comm
 
@@ -308,17 +292,16 @@ def point_weights(rule: QuadratureRule, source: MemorySource) -> np.ndarray:
 class MemoryForce:
     """The memory term of the residual, B M = (M, eps(w)) over the rule's points, as one product with E^T.
 
-    Assembled, B maps the quadrature space to u's dofs with every point's d*d components: for
-    P2 with the degree-3 rule a product with it reads 2.4 million entries per step (3.4 ms
-    at n = 64, measured; a third of the step). It is also E^T W m: with w_q |J_K| the weight
+    Assembled, B maps the quadrature space to u's dofs with every point's d*d components, 48 entries per P2
+    point, read at every step (docs/benchmarks/performance.md). It is also E^T W m: with w_q |J_K| the weight
     of each point of an owned cell (0 on ghost cells, whose owners add their part),
     (M, eps(w)) = sum_q w_q |J_K| (sum_i M_ii eps_ii(w) + sum_{i<j} (M_ij + M_ji) eps_ij(w)), so
     m holds M's diagonal components and the sums of its off-diagonal pairs (M need not be
     symmetric), and E is the source's strain operator of the independent components
     (:class:`MemorySource`), applied transposed: 24 entries per P2 point, where the full-tensor operator
     has 36 and the assembled B 48. W m is formed in m's own buffer and E^T (W m) is, in 2-D, scipy's product
-    with the transposed view of E (a CSC view of the same arrays: no second operator is stored; holding
-    E^T W apart cost 0.38 KB per 3-D dof, issue 30), in 3-D :class:`StrainMap`'s transposed product. It runs on
+    with the transposed view of E (a CSC view of the same arrays: no second operator is stored), in 3-D
+    :class:`StrainMap`'s transposed product. It runs on
     the local arrays, followed by one reverse scatter. Equal to B M to round-off (tested).
     """
 
@@ -349,17 +332,12 @@ class OutOfPlaneSource:
 
     In plane strain eps_33 = 0, so (A eps)_33 = lambda (eps_11 + eps_22); Phi_L truncates
     componentwise, so the 33 entry of the truncated tensor is the truncated 33 entry.
-    Uses the strain of the in-plane :class:`MemorySource`, which keeps its last one for it.
+    Uses the strain of the in-plane :class:`MemorySource` (kept there with ``keep`` >= 1, or computed again).
     """
 
     def __init__(self, rule: QuadratureRule, source: MemorySource) -> None:
         self.source = source
-        source.retain(1)  # the in-plane commit's strain, read again here
         self.Q = rule.space(())
-
-    def retain(self, count: int) -> None:
-        """H_33 reads the in-plane source's strains: that source keeps them."""
-        self.source.retain(count)
 
     def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
         """base + scale * H_33 (as :meth:`MemorySource.__call__`)."""
@@ -375,12 +353,7 @@ class OutOfPlaneSource:
 
     def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
                 base: np.ndarray | None = None) -> np.ndarray:
-        src = self.source
-        h = eps[0] + eps[1]
-        h *= src.lame_lambda
-        np.clip(h, -src.truncation, src.truncation, out=h)
-        z = src.zeta_at_points()
-        h *= z * scale if scale != 1.0 else z
+        h = self.source.integrand.out_of_plane(eps, self.source.zeta_at_points(), scale)
         if base is not None:
             h += base
         if out is None:

@@ -14,13 +14,14 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import Config
+from solver.config.time import TimeScheme
+from solver.laws.memory import MemoryIntegrand
 from solver.mesh.geometry import Geometry, build
-from solver.physics.material import elasticity, lame
-from solver.physics.memory import History, PlaneStrainHistory, make_history, trapezoid_term
+from solver.physics.material import lame
+from solver.physics.memory import SUM_RULES, History, PlaneStrainHistory, make_history, trapezoid_term
 from solver.physics.memory_source import MemorySource, OutOfPlaneSource
 from solver.physics.quadrature import QuadratureRule
-from solver.run.scheme import time_scheme
-from solver.solvers.damage import Damage, DamageLinearSolve, make_damage
+from solver.solvers.damage_step import Damage, DamageLinearSolve, make_damage
 from solver.solvers.linear import choose_linear
 from solver.solvers.mechanics import Mechanics
 
@@ -37,6 +38,7 @@ class Model:
     history: History | None
     rule: QuadratureRule
     mech: Mechanics
+    scheme: TimeScheme
     u_prev: fem.Function | None = None  # u_{n-1} while level n is solved (time.order = 2: the extrapolation)
     linear: str = "auto"  # the linear solver solver.linear resolves to on this mesh (linear.choose_linear)
 
@@ -45,9 +47,17 @@ class Model:
         return self.geo.comm
 
 
+def time_scheme(cfg: Config) -> TimeScheme:
+    """The scene's time scheme (memory rule, damage step, start-up), decided here once for the model."""
+    return TimeScheme.decide(cfg.time.order, cfg.memory.kernel, cfg.memory.rule, cfg.damage.enabled,
+                             cfg.solver.damage_scheme)
+
+
 def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Model:
     """Mesh, spaces and the physics terms the scene switches on (``geo``: a mesh already made, e.g. refined,
     instead of the scene's)."""
+    scheme = time_scheme(cfg)
+    sum_rule = SUM_RULES[scheme.memory_rule]
     geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim) if geo is None else geo
     mesh = geo.mesh
     disc = cfg.discretization
@@ -61,7 +71,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
         solve = DamageLinearSolve(cfg.solver.petsc_options, linear, cfg.solver.rtol)
-        damage = make_damage(time_scheme(cfg).damage_scheme(cfg), Z, u, cfg.damage, k,
+        damage = make_damage(scheme.damage_scheme, Z, u, cfg.damage, k,
                              cfg.solver.damage_quadrature_degree, solve)
         zeta = damage.zeta
     else:
@@ -69,16 +79,18 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     rule = QuadratureRule(mesh, cfg.solver.quadrature_degree)
     mat = cfg.material
     history = None
-    if cfg.memory.kernel != "none":
-        lame_lambda, lame_mu = lame(mat.E, mat.nu, mat.model)
-        source = MemorySource(rule, u, zeta, lame_lambda, lame_mu, cfg.memory.L)
-        history = make_history(cfg.memory, rule, source, k, steps)
     implicit = None
-    if history is not None and cfg.memory.rule == "trapezoid":
-        implicit = trapezoid_term(history, zeta, lambda e: elasticity(e, mat.E, mat.nu, mat.model), cfg.memory.L)
-    if history is not None and mat.model == "plane_strain":  # sigma_33 has a memory part too
-        history = PlaneStrainHistory(history, make_history(cfg.memory, rule, OutOfPlaneSource(rule, source), k, steps))
+    if cfg.memory.kernel != "none":
+        integrand = MemoryIntegrand(cfg.memory.L, *lame(mat.E, mat.nu, mat.model))
+        # the strains read again: u_n's (strain norm, H_33, the next commit); u_{n-1}'s too for the extrapolation
+        source = MemorySource(rule, u, zeta, integrand, keep=2 if sum_rule.extrapolated else 1)
+        history = make_history(cfg.memory, scheme.memory_rule, rule, source, k, steps)
+        if sum_rule.implicit:
+            implicit = trapezoid_term(history, integrand, zeta)
+        if mat.model == "plane_strain":  # sigma_33 has a memory part too
+            out_of_plane = make_history(cfg.memory, scheme.memory_rule, rule, OutOfPlaneSource(rule, source), k, steps)
+            history = PlaneStrainHistory(history, out_of_plane)
     mech = Mechanics(geo, u, mat, cfg.boundaries, settings, history, implicit_term=implicit,
                      body_force=cfg.body_force)
     u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
-    return Model(cfg, geo, u, zeta, damage, history, rule, mech, u_prev, linear)
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech, scheme, u_prev, linear)

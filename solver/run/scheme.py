@@ -1,33 +1,52 @@
 """The time scheme (docs/model.md §3.6, §3.7): what each of a level's three steps does, per order.
 
 Level n-1 -> n is: 1. memory (M_n from level n-1), 2. damage (zeta_n), 3. displacement (u_n).
-:class:`FirstOrderScheme` is the paper's: the left-rectangle or trapezoidal memory sum and
-the explicit or semi-implicit damage step (``solver.damage_scheme``). :class:`SecondOrderScheme`
-adds the trapezoid's current term at an extrapolated u, the CN-AB2 damage step, and its start-up:
-at n = 1 a Heun predictor-corrector, since AB2 and the extrapolation need two past levels.
+What the scheme is (the memory rule, the damage step, the start-up) is decided once, by
+:class:`solver.config.time.TimeScheme`, from which the model is built; the classes here carry it out
+on the model's parts (:class:`LevelParts`). :class:`FirstOrderScheme` is the paper's: the
+left-rectangle or trapezoidal memory sum and the explicit or semi-implicit damage step.
+:class:`SecondOrderScheme` adds the trapezoid's current term at an extrapolated u, the CN-AB2 damage
+step, and, where the TimeScheme says so, its start-up: at n = 1 a Heun predictor-corrector, since AB2
+and the extrapolation need two past levels.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-from solver.config import Config
-from solver.solvers.damage import DamageStepInfo
+from dolfinx import fem
 
-if TYPE_CHECKING:
-    from solver.run.model import Model
+from solver.config.time import TimeScheme
+from solver.physics.memory import History
+from solver.solvers.damage_step import Damage, DamageStepInfo
+from solver.solvers.mechanics import Mechanics
+
+
+class LevelParts(Protocol):
+    """What a scheme steps: the fields and solvers of a model (:class:`solver.run.model.Model` is one)."""
+
+    @property
+    def u(self) -> fem.Function: ...
+
+    @property
+    def u_prev(self) -> fem.Function | None: ...
+
+    @property
+    def damage(self) -> Damage | None: ...
+
+    @property
+    def history(self) -> History | None: ...
+
+    @property
+    def mech(self) -> Mechanics: ...
 
 
 class FirstOrderScheme:
     """Implicit Euler in time with the history and the damage source from level n-1."""
 
-    def __init__(self, model: Model) -> None:
+    def __init__(self, model: LevelParts, scheme: TimeScheme) -> None:
         self.model = model
-
-    @staticmethod
-    def damage_scheme(cfg: Config) -> str:
-        """The damage step that goes with this scheme (:func:`solver.solvers.damage.make_damage`)."""
-        return cfg.solver.damage_scheme
+        self.scheme = scheme
 
     def memory(self, n: int) -> None:
         """1. M_n from (u_{n-1}, zeta_{n-1}): level n-1 converged, so it is committed now."""
@@ -45,15 +64,6 @@ class FirstOrderScheme:
 
 class SecondOrderScheme(FirstOrderScheme):
     """Trapezoidal memory with the current term at u* = 2 u_{n-1} - u_{n-2}, CN-AB2 damage; Heun's start."""
-
-    @staticmethod
-    def damage_scheme(cfg: Config) -> str:
-        return "cnab2"
-
-    def __init__(self, model: Model) -> None:
-        super().__init__(model)
-        # the Heun start corrects zeta_1 and M_1 (both need two past levels otherwise); nothing to correct without
-        self.heun_start = model.damage is not None or model.u_prev is not None
 
     def damage(self, n: int) -> DamageStepInfo | None:
         """2. zeta_n by CN-AB2, then M_n's current term at u* (it needs zeta_n)."""
@@ -73,7 +83,7 @@ class SecondOrderScheme(FirstOrderScheme):
     def displacement(self, n: int, t: float, dinfo: DamageStepInfo | None):
         """3. u_n; at n = 1 u_1 is a predictor, corrected by :meth:`_heun_corrector`."""
         info, dinfo = super().displacement(n, t, dinfo)
-        if n == 1 and self.heun_start:
+        if n == 1 and self.scheme.heun_start:
             return self._heun_corrector(t, info, dinfo)
         return info, dinfo
 
@@ -93,6 +103,6 @@ class SecondOrderScheme(FirstOrderScheme):
         return again, dinfo
 
 
-def time_scheme(cfg: Config) -> type[FirstOrderScheme]:
-    """The scheme of ``time.order``."""
-    return SecondOrderScheme if cfg.time.order == 2 else FirstOrderScheme
+def level_scheme(model: LevelParts, scheme: TimeScheme) -> FirstOrderScheme:
+    """The steps of ``scheme``'s order, on the model's parts."""
+    return (SecondOrderScheme if scheme.order == 2 else FirstOrderScheme)(model, scheme)

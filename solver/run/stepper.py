@@ -1,7 +1,8 @@
 """The time loop of Problem VP^hk (docs/model.md §3.6).
 
 :meth:`Stepper.step` advances level n-1 -> n, with only data of level n-1 on the right-hand sides
-(what each step does per order: :mod:`solver.run.scheme`):
+(what each step does per order: :mod:`solver.run.scheme`, the order's choices being the model's
+:class:`solver.config.time.TimeScheme`):
   1. memory: M_n from (u_{n-1}, zeta_{n-1}) -- level n-1 converged, so it is committed now;
   2. damage: zeta_{n-1} -> zeta_n (uses u_{n-1}, zeta_{n-1});
   3. displacement: u_n with M_n;
@@ -22,7 +23,7 @@ from solver.errors import NonFiniteError, SolveFailure
 from solver.physics.diagnostics import DamageDiagnostics
 from solver.physics.quadrature import all_finite
 from solver.run.model import Model
-from solver.run.scheme import time_scheme
+from solver.run.scheme import level_scheme
 
 TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output", "wall_time")
 
@@ -34,7 +35,7 @@ class Stepper:
         self.model = model
         self.k = model.cfg.time.k
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
-        self.scheme = time_scheme(model.cfg)(model)
+        self.scheme = level_scheme(model, model.scheme)
 
     def step(self, n: int) -> dict:
         """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""

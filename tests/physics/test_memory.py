@@ -7,18 +7,25 @@ import pytest
 import ufl
 from conftest import solve, unit_mesh
 from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from solver.config import MemoryConfig, from_dict
 from solver.errors import ConfigError
+from solver.laws.memory import MemoryIntegrand
 from solver.physics.material import elasticity, lame, strain
-from solver.physics.memory import PronyHistory, TabulatedHistory, make_history, memory_source
+from solver.physics.memory import PronyHistory, TabulatedHistory, make_history, memory_source, trapezoid_term
 from solver.physics.memory_source import MemorySource
 from solver.physics.quadrature import QuadratureRule
 
 
 def A(eps):
     return elasticity(eps, 100.0, 0.3, "plane_stress")
+
+
+def law(L):
+    return MemoryIntegrand(L, *lame(100.0, 0.3, "plane_stress"))
 
 
 def _setup(comm, degree=1):
@@ -55,7 +62,7 @@ def test_recursion_matches_direct_sum(comm, name, degree):
     cfg, g = KERNELS[name]
     m, u, zeta, rule = _setup(comm, degree)
     k, steps = 0.05, 12
-    hist = make_history(cfg, rule, MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), cfg.L), k, steps)
+    hist = make_history(cfg, "left", rule, MemorySource(rule, u, zeta, law(cfg.L)), k, steps)
     assert isinstance(hist, PronyHistory)
     probe = rule.evaluator(memory_source(u, zeta, A, cfg.L), hist.M.function_space)  # the definition, in UFL
     hs = []
@@ -76,9 +83,10 @@ def test_tabulated_kernel_matches_prony(comm):
     k, steps = 0.1, 8
     s = k * np.arange(steps + 2)
     table = tuple((float(si), float(-np.exp(-si))) for si in s)
-    src = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), 1000.0)
-    tab = make_history(MemoryConfig(kernel="tabulated", table=table), rule, src, k, steps)
-    pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0,), times=(1.0,)), rule, src, k, steps)
+    src = MemorySource(rule, u, zeta, law(1000.0))
+    tab = make_history(MemoryConfig(kernel="tabulated", table=table), "left", rule, src, k, steps)
+    pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0,), times=(1.0,)), "left", rule, src, k,
+                       steps)
     assert isinstance(tab, TabulatedHistory)
     for n in range(steps):
         _drive(u, zeta, n)
@@ -89,7 +97,7 @@ def test_tabulated_kernel_matches_prony(comm):
 
 def test_no_memory_builds_nothing(comm):
     m, u, zeta, rule = _setup(comm)
-    assert make_history(MemoryConfig(kernel="none"), rule, None, 0.1, 3) is None
+    assert make_history(MemoryConfig(kernel="none"), "left", rule, None, 0.1, 3) is None
 
 
 def test_quadrature_layout_integrates_like_ufl(comm):
@@ -116,7 +124,7 @@ def test_fast_source_equals_ufl_expression(comm, degree, damage):
     m, u, zeta, rule = _setup(comm, degree)
     z = zeta if damage else fem.Constant(m, 0.7)
     L = 150.0
-    fast = MemorySource(rule, u, z, *lame(100.0, 0.3, "plane_stress"), L)
+    fast = MemorySource(rule, u, z, law(L))
     ref = rule.evaluator(memory_source(u, z, A, L), fast.Q)
     for n in (2, 5):
         _drive(u, zeta, n)
@@ -219,7 +227,7 @@ def test_trapezoid_needs_newton():
 
 @pytest.mark.parametrize("rule", ["trapezoid", "trapezoid_extrapolated"])
 def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
-    """M_0 = 0: level 0 does not depend on the rule or on k (the implicit trapezoid once added its term there)."""
+    """M_0 = 0: level 0 does not depend on the rule or on k: the implicit trapezoid's current term has weight 0 there."""
     from conftest import ROOT
 
     from solver.config import load
@@ -239,7 +247,7 @@ def test_level_0_is_the_elastic_problem_for_every_rule(comm, rule):
 def test_extrapolated_current_term_is_its_definition(comm, model_name):
     """time.order = 2, P2: after level n >= 2, M_n = P_n + (k/2) g(0) zeta_n Phi_L(A eps(u*)), u* = 2 u_{n-1} - u_{n-2},
     against the UFL definition with the truncation acting; in plane strain M_33 likewise with (A eps)_33 =
-    lambda tr eps (the extrapolated term was once never set there: M stayed 0)."""
+    lambda tr eps, set as well (M_33 not left at 0)."""
     from conftest import ROOT
 
     from solver.config import load
@@ -288,8 +296,8 @@ def test_extrapolated_source_from_kept_strains(comm, keep):
     m, u, zeta, rule = _setup(comm, 2)
     u = fem.Function(fem.VectorFunctionSpace(m, ("CG", 2)))
     L = 150.0
-    fast = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), L, keep=keep)
-    fresh = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), L)
+    fast = MemorySource(rule, u, zeta, law(L), keep=keep)
+    fresh = MemorySource(rule, u, zeta, law(L))
     ustar = fem.Function(u.function_space)
     ref = rule.evaluator(memory_source(ustar, zeta, A, L), fast.Q)
     _drive(u, zeta, 2)
@@ -334,7 +342,7 @@ def test_history_finite_sees_what_was_written_through_state(comm):
     """PronyHistory.finite() uses the sum taken at the commit; a NaN written through state() (a checkpoint) is seen."""
     cfg, _ = KERNELS["constant"]
     m, u, zeta, rule = _setup(comm)
-    hist = make_history(cfg, rule, MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_stress"), cfg.L), 0.1, 3)
+    hist = make_history(cfg, "left", rule, MemorySource(rule, u, zeta, law(cfg.L)), 0.1, 3)
     _drive(u, zeta, 1)
     hist.commit(0)
     assert hist.finite()
@@ -347,10 +355,39 @@ def test_history_finite_sees_what_was_written_through_state(comm):
 
 def test_every_configured_rule_is_a_sum_rule():
     """Each memory.rule the config resolves to has its SumRule: H_0 at weight 1 (left) or 1/2 (trapezoids), the
-    past kept apart only by the extrapolated trapezoid."""
+    past kept apart only by the extrapolated trapezoid, the current term implicit only in the plain trapezoid."""
     from solver.config.memory import RULES
     from solver.physics.memory import SUM_RULES
 
-    assert set(SUM_RULES) == set(RULES) and SUM_RULES["auto"] is SUM_RULES["left"]
-    assert {name: (r.first_weight, r.extrapolated) for name, r in SUM_RULES.items() if name != "auto"} == {
-        "left": (1.0, False), "trapezoid": (0.5, False), "trapezoid_extrapolated": (0.5, True)}
+    assert set(SUM_RULES) == set(RULES) - {"auto"}
+    assert {name: (r.first_weight, r.extrapolated, r.implicit) for name, r in SUM_RULES.items()} == {
+        "left": (1.0, False, False), "trapezoid": (0.5, False, True), "trapezoid_extrapolated": (0.5, True, False)}
+
+
+@pytest.mark.parametrize("sum_rule", ["left", "trapezoid", "trapezoid_extrapolated"])
+def test_only_the_implicit_trapezoid_has_a_current_weight_and_its_term_leaves_the_history_alone(comm, sum_rule):
+    """The weight of the implicit current-level term is the history's own, declared at construction (0 until the
+    first commit, (k/2) g(0) after); trapezoid_term reads it and changes nothing; other rules have none."""
+    cfg, _ = KERNELS["prony3"]
+    m, u, zeta, rule = _setup(comm)
+    hist = make_history(cfg, sum_rule, rule, MemorySource(rule, u, zeta, law(cfg.L)), 0.1, 3)
+    if sum_rule != "trapezoid":
+        assert hist.current_weight is None
+        with pytest.raises(ValueError, match=sum_rule):
+            trapezoid_term(hist, law(cfg.L), zeta)
+        return
+    weight = hist.current_weight
+    assert float(weight.value) == 0.0
+    term = trapezoid_term(hist, law(cfg.L), zeta)
+    assert hist.current_weight is weight and float(weight.value) == 0.0
+    _drive(u, zeta, 1)
+    hist.commit(0)
+    assert float(weight.value) == 0.5 * 0.1 * sum(cfg.weights)
+    w = ufl.TestFunction(u.function_space)
+    form = fem.form(term(u, w))  # the weight is a constant of the form: the commit's value, not a copy
+    b = fpetsc.assemble_vector(form)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    H = law(cfg.L).ufl(strain(u), zeta)
+    want = fpetsc.assemble_vector(fem.form(float(weight.value) * ufl.inner(H, strain(w)) * rule.dx))
+    want.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    assert np.allclose(b.array_r, want.array_r, rtol=1e-13, atol=1e-13 * np.abs(want.array_r).max())

@@ -7,6 +7,7 @@ import ufl
 from dolfinx import fem, mesh
 from mpi4py import MPI
 
+from solver.laws.memory import MemoryIntegrand
 from solver.physics.material import elasticity, lame, strain
 from solver.physics.memory import memory_source
 from solver.physics.memory_source import MemoryForce, MemorySource, StrainMap, sparse_strain_operator
@@ -27,7 +28,7 @@ def test_the_table_gives_the_sparse_matrix_products(comm, degree):
     """E u and E^T m of the table equal those of the sparse matrix built from the same gradients (2-D's), to
     round-off; the table takes a third of the matrix's bytes or less (a quarter at 10^5 dofs)."""
     _, u, zeta, rule = _box(comm, degree)
-    source = MemorySource(rule, u, zeta, *lame(100.0, 0.3, "plane_strain"), 1e30)
+    source = MemorySource(rule, u, zeta, MemoryIntegrand(1e30, *lame(100.0, 0.3, "plane_strain")))
     E = source.strain_operator
     assert isinstance(E, StrainMap)
     S = sparse_strain_operator(E.grad, E.nodes, E.bs, E.rows_q, E.size_q, E.size_v, E.pairs)
@@ -46,7 +47,7 @@ def test_the_3d_source_and_force_equal_their_definitions(comm):
     m, u, zeta, rule = _box(comm, 1)
     lam, mu = lame(100.0, 0.3, "plane_strain")
     L = 60.0
-    source = MemorySource(rule, u, zeta, lam, mu, L)
+    source = MemorySource(rule, u, zeta, MemoryIntegrand(L, lam, mu))
 
     def A(eps):
         return elasticity(eps, 100.0, 0.3, "plane_strain")

@@ -1,47 +1,21 @@
-"""Damage source (eta, Psi, phi) against hand values and the damage step's invariants."""
+"""The damage step's invariants (solver/solvers/damage_step.py); the source's law is tests/laws/test_damage.py."""
 
 
 import numpy as np
 import pytest
-from conftest import ROOT, eval_point, solve, unit_mesh
+from conftest import ROOT, solve, unit_mesh
 from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import DamageConfig, load
 from solver.errors import DamageSolveError
-from solver.physics.damage import eta, psi, source
 from solver.run.model import build_model
-from solver.solvers.damage import (
+from solver.solvers.damage_step import (
     CNAB2Damage,
     ExplicitDamage,
     SemiImplicitDamage,
     make_damage,
 )
-
-
-def phi_hand(eps, z, c: DamageConfig) -> float:
-    e = z if z > c.zeta_star else c.zeta_star
-    q = min(float(np.sum(eps * eps)), c.q_star)
-    return -c.lambda1 * (1 - e) / e - max(0.5 * c.lambda2 * q - c.lambda3, 0.0)
-
-
-@pytest.mark.parametrize("z", [1.0, 0.5, 0.02, 0.01, 0.005])
-@pytest.mark.parametrize("scale", [0.0, 0.1, 2.0])
-def test_source_hand_values(comm, z, scale):
-    m = unit_mesh(comm)
-    c = DamageConfig(lambda3=0.3)
-    eps = scale * np.array([[0.3, 0.1], [0.1, -0.2]])
-    got = eval_point(source(fem.Constant(m, eps), fem.Constant(m, z), c), m)
-    assert float(got) == pytest.approx(phi_hand(eps, z, c), rel=1e-13, abs=1e-15)
-
-
-def test_eta_and_psi(comm):
-    m = unit_mesh(comm)
-    assert float(eval_point(eta(fem.Constant(m, 0.3), 0.01), m)) == 0.3
-    assert float(eval_point(eta(fem.Constant(m, 0.001), 0.01), m)) == 0.01
-    eps = np.array([[1.0, 2.0], [2.0, 3.0]])  # eps.eps = 18
-    assert float(eval_point(psi(fem.Constant(m, eps), 20.0), m)) == pytest.approx(18.0)
-    assert float(eval_point(psi(fem.Constant(m, eps), 1.0), m)) == 1.0
 
 
 def _damage(comm, cfg, k=0.1, n=6):

@@ -4,7 +4,7 @@ Each step is one linear solve with a matrix assembled and factored once (explici
 
     ((zeta_n - zeta_{n-1}) / k, xi) + kappa (grad zeta_n, grad xi) = (phi(eps(u_{n-1}), zeta_{n-1}), xi)
 
-with Fremond's source phi (:mod:`solver.physics.damage`). One class per time scheme:
+with Fremond's source phi (:class:`solver.laws.damage.FremondSource`). One class per time scheme:
 :class:`ExplicitDamage` (above), :class:`SemiImplicitDamage` (the source linearised in zeta_n),
 :class:`CNAB2Damage` (second order); :func:`make_damage` picks one. Nodal values are clipped to
 [zeta*, 1] afterwards when the scene asks for it; the number of clipped nodes is reported.
@@ -23,7 +23,6 @@ from petsc4py import PETSc
 
 from solver.config import DamageConfig
 from solver.errors import DamageSolveError
-from solver.physics.damage import source
 from solver.physics.material import strain
 from solver.solvers.linear import REASONS_KSP, make_ksp
 
@@ -64,12 +63,13 @@ class Damage:
     def __init__(self, V: fem.FunctionSpace, u: fem.Function, cfg: DamageConfig, k: float, degree: int,
                  solve: DamageLinearSolve = DamageLinearSolve()) -> None:
         self.cfg = cfg
+        self.law = cfg.law
         self.V = V
         self.zeta = fem.Function(V, name="damage")
         self.zeta.x.array[:] = cfg.zeta0
         z, xi = ufl.TrialFunction(V), ufl.TestFunction(V)
         dx = ufl.dx(metadata={"quadrature_degree": degree})
-        phi = source(strain(u), self.zeta, cfg)
+        phi = self.law.ufl(strain(u), self.zeta)
         k_ = fem.Constant(V.mesh, PETSc.ScalarType(k))  # a constant, not a number: one compiled form for every k
         self.k = k
         a, rhs = self._forms(z, xi, phi, k_, dx)
@@ -156,8 +156,7 @@ class SemiImplicitDamage(Damage):
 
     def _forms(self, z, xi, phi, k_, dx) -> tuple[ufl.Form, ufl.Form]:
         a, rhs = super()._forms(z, xi, phi, k_, dx)
-        cfg = self.cfg
-        phi_z = ufl.conditional(ufl.gt(self.zeta, cfg.zeta_star), cfg.lambda1 / self.zeta**2, 0.0)
+        phi_z = self.law.ufl_slope(self.zeta)
         a -= k_ * phi_z * z * xi * dx
         rhs -= k_ * phi_z * self.zeta * xi * dx
         return a, rhs
@@ -174,8 +173,7 @@ class SemiImplicitDamage(Damage):
         k phi_zeta >= 1 it is meaningless (zeta jumps far outside [zeta*, 1]); refuse rather than clip it."""
         comm = self.V.mesh.comm
         z = self.zeta.x.array[: self.nlocal]
-        above = z > self.cfg.zeta_star
-        worst = float((self.k * self.cfg.lambda1 / z[above] ** 2).max()) if above.any() else 0.0
+        worst = self.k * float(self.law.slope(z).max()) if z.size else 0.0
         worst = comm.allreduce(worst, op=MPI.MAX)
         if worst >= 1.0:
             zmin = comm.allreduce(float(z.min()) if z.size else np.inf, op=MPI.MIN)
