@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
+from solver.laws.contact import CONTACT_LAWS, ContactLaw
+
 from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
 
@@ -13,7 +15,7 @@ BOX_FACES = ("left", "right", "front", "back", "bottom", "top")
 # a box face: (normal axis, which corner), its two tangential axes in order
 FACE_AXIS = {"left": (0, 0), "right": (0, 1), "front": (1, 0), "back": (1, 1), "bottom": (2, 0), "top": (2, 1)}
 ROLES = ("clamped", "displacement", "traction", "contact")
-LAWS = ("linear", "power", "limited_penetration")
+LAWS = tuple(CONTACT_LAWS)  # the contact laws' names (solver/laws/contact.py)
 AXES = ("x", "y", "z")
 INTERPOLATIONS = ("linear", "cubic")
 # analytic rigid obstacles (solver/physics/gap.py) and their keys
@@ -25,9 +27,9 @@ PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
     "right": {"role": "traction", "traction": [-10.0, -10.0]},
     "bottom": {"role": "contact", "gap": 0.0, "mu": 1e-10},
 }
-# keys of a compliance law (beside law, gap and gap_coordinate)
-_LAW_KEYS = {"linear": ("mu",), "power": ("coefficient", "exponent"), "limited_penetration": ("mu", "depth", "mu_stiff")}
-_CONTACT_KEYS = ("gap", "gap_coordinate", "gap_interpolation", "obstacle", "law", "mu", "coefficient", "exponent", "depth", "mu_stiff")
+# every contact law's keys (each law's own: CONTACT_LAWS[name].keys())
+_LAW_PARAMETERS = tuple(dict.fromkeys(key for law in CONTACT_LAWS.values() for key in law.keys()))
+_CONTACT_KEYS = ("gap", "gap_coordinate", "gap_interpolation", "obstacle", "law", *_LAW_PARAMETERS)
 _PER_ROLE = {"clamped": (), "displacement": ("displacement",), "traction": ("traction",), "contact": _CONTACT_KEYS}
 _KEYS = ("role", "side", "interval", "traction", "displacement", *_CONTACT_KEYS)
 
@@ -70,14 +72,9 @@ class BoundaryConfig:
     Contact: the gap is ``gap`` or, when ``gap_table`` holds rows (s, g), piecewise linear
     in the coordinate ``gap_coordinate`` (held constant beyond the table; ``gap_interpolation``
     = "cubic": a C² spline through the rows), or an analytic rigid ``obstacle`` (a plane, a
-    circle or a sphere; solver/physics/gap.py). The compliance
-    law p(r) of -sigma_nu = p(u_nu - g):
-
-    - ``linear``: p(r) = r_+ / mu (the paper's);
-    - ``power``: p(r) = coefficient r_+^exponent (exponent >= 1);
-    - ``limited_penetration``: p(r) = r_+ / mu + (r - depth)_+ / mu_stiff: a soft layer of
-      thickness ``depth`` on a stiff foundation; Signorini's condition at u_nu = g + depth
-      as mu_stiff -> 0.
+    circle or a sphere; solver/physics/gap.py). The compliance law p(r) of
+    -sigma_nu = p(u_nu - g) is ``law`` with its parameters (``mu``, ``coefficient``, ...):
+    :attr:`contact_law` is the law object (solver/laws/contact.py) those fields make.
     """
 
     name: str
@@ -98,6 +95,12 @@ class BoundaryConfig:
     mu_stiff: float = 1e-10
     displacement: tuple[Table | None, ...] = ()
     patch: tuple[tuple[float, float], tuple[float, float]] | None = None
+
+    @property
+    def contact_law(self) -> ContactLaw:
+        """The part's compliance law p (role contact), from ``law`` and its parameters."""
+        law = CONTACT_LAWS[self.law]
+        return law(**{key: getattr(self, key) for key in law.keys()})
 
     def traction_at(self, t: float) -> tuple[float, ...]:
         """Traction vector at time ``t`` (left-continuous at jumps)."""
@@ -259,35 +262,12 @@ def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, 
 
 
 def _contact(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig, dim: int) -> BoundaryConfig:
-    law = string(ctx, f"{sec}.law", b.get("law", "linear"), LAWS)
-    for key in ("mu", "coefficient", "exponent", "depth", "mu_stiff"):
-        if key in b and key not in _LAW_KEYS[law]:
-            raise ctx.fail(f"{sec}.{key}", b[key], f"not used by law '{law}' (it takes {', '.join(_LAW_KEYS[law])})")
-    values: dict[str, Any] = {"law": law}
-    if law in ("linear", "limited_penetration"):
-        if law == "limited_penetration" and "mu" not in b:
-            raise ctx.fail(f"{sec}.mu", "<missing>", "law 'limited_penetration' needs mu (the layer), depth")
-        mu = number(ctx, f"{sec}.mu", b.get("mu", 1e-10))
-        need(ctx, f"{sec}.mu", mu, mu > 0, "must be > 0 (deformability of the foundation)")
-        values["mu"] = mu
-    if law == "power":
-        for key in ("coefficient", "exponent"):
-            if key not in b:
-                raise ctx.fail(f"{sec}.{key}", "<missing>", "law 'power' needs coefficient c and exponent m: p(r) = c r_+^m")
-        c = number(ctx, f"{sec}.coefficient", b["coefficient"])
-        need(ctx, f"{sec}.coefficient", c, c > 0, "must be > 0")
-        m = number(ctx, f"{sec}.exponent", b["exponent"])
-        need(ctx, f"{sec}.exponent", m, m >= 1, "must be >= 1 (p monotone and C^1 for m > 1)")
-        values.update(coefficient=c, exponent=m)
-    if law == "limited_penetration":
-        if "depth" not in b:
-            raise ctx.fail(f"{sec}.depth", "<missing>", "law 'limited_penetration' needs depth (the layer's thickness)")
-        depth = number(ctx, f"{sec}.depth", b["depth"])
-        need(ctx, f"{sec}.depth", depth, depth > 0, "must be > 0")
-        mu_stiff = number(ctx, f"{sec}.mu_stiff", b.get("mu_stiff", 1e-10))
-        need(ctx, f"{sec}.mu_stiff", mu_stiff, 0 < mu_stiff <= values["mu"],
-             f"must be in (0, mu = {values['mu']}]: the foundation under the layer is the stiffer one")
-        values.update(depth=depth, mu_stiff=mu_stiff)
+    name = string(ctx, f"{sec}.law", b.get("law", "linear"), LAWS)
+    law = CONTACT_LAWS[name]
+    for key in _LAW_PARAMETERS:
+        if key in b and key not in law.keys():
+            raise ctx.fail(f"{sec}.{key}", b[key], f"not used by law '{name}' (it takes {', '.join(law.keys())})")
+    values: dict[str, Any] = {"law": name, **law.parse(_LawTable(ctx, sec, b)).parameters()}
     gap = b.get("gap", 0.0)
     if "obstacle" in b:
         if "gap" in b or "gap_coordinate" in b or "gap_interpolation" in b:
@@ -305,6 +285,22 @@ def _contact(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig
         if "gap_interpolation" in b:
             raise ctx.fail(f"{sec}.gap_interpolation", b["gap_interpolation"], "only with a gap table [[s, g], ...]")
     return replace(part, **values)
+
+
+class _LawTable:
+    """A contact part's table as its law reads it (:class:`solver.laws.contact.LawTable`): keys ``{sec}.key``."""
+
+    def __init__(self, ctx: Ctx, sec: str, table: dict) -> None:
+        self.ctx, self.sec, self.table = ctx, sec, table
+
+    def given(self, key: str) -> bool:
+        return key in self.table
+
+    def number(self, key: str, default: float | None = None) -> float:
+        return number(self.ctx, f"{self.sec}.{key}", self.table.get(key, default))
+
+    def fail(self, key: str, value: Any, allowed: str) -> Exception:
+        return self.ctx.fail(f"{self.sec}.{key}", value, allowed)
 
 
 def _obstacle(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[str, Any], ...]:
@@ -405,8 +401,7 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
             else:
                 entry["gap"] = b.gap
             entry["law"] = b.law
-            for key in _LAW_KEYS[b.law]:
-                entry[key] = getattr(b, key)
+            entry.update(b.contact_law.parameters())
         out[b.name] = entry
     return out
 
