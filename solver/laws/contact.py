@@ -67,6 +67,11 @@ class ContactLaw(ABC):
     def parse(cls, table: LawTable) -> ContactLaw:
         """The law of a scene's contact table, its values validated."""
 
+    @classmethod
+    @abstractmethod
+    def example(cls) -> ContactLaw:
+        """A typical instance (the shared test's and the docs' sample)."""
+
     @abstractmethod
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         """p(r) in UFL (UFL differentiates max_value to the Heaviside: the semismooth Newton's derivative)."""
@@ -173,6 +178,10 @@ class LinearLaw(PiecewiseLinearLaw):
         _need(table, "mu", mu, mu > 0, "must be > 0 (deformability of the foundation)")
         return cls(mu)
 
+    @classmethod
+    def example(cls) -> LinearLaw:
+        return cls(1e-3)
+
     @property
     def ramps(self) -> tuple[tuple[float, float], ...]:
         return ((0.0, 1.0 / self.mu),)
@@ -209,6 +218,10 @@ class PowerLaw(ContactLaw):
         m = table.number("exponent")
         _need(table, "exponent", m, m >= 1, "must be >= 1 (p monotone and C^1 for m > 1)")
         return cls(c, m)
+
+    @classmethod
+    def example(cls) -> PowerLaw:
+        return cls(5.0e4, 1.5)
 
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         return self.coefficient * ufl.max_value(r, 0.0) ** self.exponent
@@ -248,6 +261,10 @@ class LimitedPenetrationLaw(PiecewiseLinearLaw):
         _need(table, "mu_stiff", mu_stiff, 0 < mu_stiff <= mu,
               f"must be in (0, mu = {mu}]: the foundation under the layer is the stiffer one")
         return cls(mu, depth, mu_stiff)
+
+    @classmethod
+    def example(cls) -> LimitedPenetrationLaw:
+        return cls(1e-3, 0.1, 1e-5)
 
     @property
     def ramps(self) -> tuple[tuple[float, float], ...]:
