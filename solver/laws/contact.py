@@ -90,7 +90,7 @@ class ContactLaw(ABC):
 
     @property
     def kinks(self) -> tuple[float, ...]:
-        """The r where p' jumps (none: p is C^1 away from r = 0, or smooth)."""
+        """The r where p' jumps (none here: a law with kinks says where)."""
         return ()
 
     @property
@@ -222,6 +222,10 @@ class PowerLaw(ContactLaw):
     @classmethod
     def example(cls) -> PowerLaw:
         return cls(5.0e4, 1.5)
+
+    @property
+    def kinks(self) -> tuple[float, ...]:
+        return (0.0,) if self.exponent == 1.0 else ()  # p'(0+) = c for m = 1, 0 for m > 1
 
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
         return self.coefficient * ufl.max_value(r, 0.0) ** self.exponent

@@ -175,3 +175,10 @@ def test_point_laws_evaluate_each_run_with_its_law():
     if not joined.piecewise_linear:
         with pytest.raises(TypeError):
             joined.state(r)
+
+
+def test_power_law_of_exponent_one_has_the_linear_kink():
+    """p = c r_+ jumps in slope at 0 like the linear law (m > 1: p' is continuous there, no kink)."""
+    law = CONTACT_LAWS["power"](2.0, 1.0)
+    assert law.kinks == (0.0,) and list(law.slope(np.array([-1e-9, 1e-9]))) == [0.0, 2.0]
+    assert CONTACT_LAWS["power"](2.0, 1.5).kinks == ()
