@@ -5,19 +5,20 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from .fields import Ctx, check_keys, need, number, string, vector
+from solver.laws.contact import CONTACT_LAWS, ContactLaw
+
+from .contact import AXES, CONTACT_KEYS, INTERPOLATIONS, LAWS, OBSTACLES, contact_values
+from .fields import Ctx, check_keys, number, string, vector
 from .mesh import MeshConfig
+
+__all__ = ["AXES", "BOX_FACES", "FACE_AXIS", "FREE", "INTERPOLATIONS", "LAWS", "OBSTACLES", "PAPER_BOUNDARIES", "ROLES",
+           "SIDES", "BoundaryConfig", "Table", "face_bounds", "parse", "table_at", "time_table", "to_toml"]
 
 SIDES = ("left", "right", "bottom", "top")
 BOX_FACES = ("left", "right", "front", "back", "bottom", "top")
 # a box face: (normal axis, which corner), its two tangential axes in order
 FACE_AXIS = {"left": (0, 0), "right": (0, 1), "front": (1, 0), "back": (1, 1), "bottom": (2, 0), "top": (2, 1)}
 ROLES = ("clamped", "displacement", "traction", "contact")
-LAWS = ("linear", "power", "limited_penetration")
-AXES = ("x", "y", "z")
-INTERPOLATIONS = ("linear", "cubic")
-# analytic rigid obstacles (solver/physics/gap.py) and their keys
-OBSTACLES = {"plane": ("point", "normal"), "circle": ("centre", "radius"), "sphere": ("centre", "radius")}
 FREE = "free"
 # The paper's Example 1 boundary (docs/model.md §5), used when a scene gives none.
 PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
@@ -25,11 +26,8 @@ PAPER_BOUNDARIES: dict[str, dict[str, Any]] = {
     "right": {"role": "traction", "traction": [-10.0, -10.0]},
     "bottom": {"role": "contact", "gap": 0.0, "mu": 1e-10},
 }
-# keys of a compliance law (beside law, gap and gap_coordinate)
-_LAW_KEYS = {"linear": ("mu",), "power": ("coefficient", "exponent"), "limited_penetration": ("mu", "depth", "mu_stiff")}
-_CONTACT_KEYS = ("gap", "gap_coordinate", "gap_interpolation", "obstacle", "law", "mu", "coefficient", "exponent", "depth", "mu_stiff")
-_PER_ROLE = {"clamped": (), "displacement": ("displacement",), "traction": ("traction",), "contact": _CONTACT_KEYS}
-_KEYS = ("role", "side", "interval", "traction", "displacement", *_CONTACT_KEYS)
+_PER_ROLE = {"clamped": (), "displacement": ("displacement",), "traction": ("traction",), "contact": CONTACT_KEYS}
+_KEYS = ("role", "side", "interval", "traction", "displacement", *CONTACT_KEYS)
 
 Table = tuple[tuple[float, ...], ...]
 
@@ -70,14 +68,9 @@ class BoundaryConfig:
     Contact: the gap is ``gap`` or, when ``gap_table`` holds rows (s, g), piecewise linear
     in the coordinate ``gap_coordinate`` (held constant beyond the table; ``gap_interpolation``
     = "cubic": a C² spline through the rows), or an analytic rigid ``obstacle`` (a plane, a
-    circle or a sphere; solver/physics/gap.py). The compliance
-    law p(r) of -sigma_nu = p(u_nu - g):
-
-    - ``linear``: p(r) = r_+ / mu (the paper's);
-    - ``power``: p(r) = coefficient r_+^exponent (exponent >= 1);
-    - ``limited_penetration``: p(r) = r_+ / mu + (r - depth)_+ / mu_stiff: a soft layer of
-      thickness ``depth`` on a stiff foundation; Signorini's condition at u_nu = g + depth
-      as mu_stiff -> 0.
+    circle or a sphere; solver/physics/gap.py). The compliance law p(r) of
+    -sigma_nu = p(u_nu - g) is ``law`` with its parameters (``mu``, ``coefficient``, ...):
+    :attr:`contact_law` is the law object (solver/laws/contact.py) those fields make.
     """
 
     name: str
@@ -98,6 +91,12 @@ class BoundaryConfig:
     mu_stiff: float = 1e-10
     displacement: tuple[Table | None, ...] = ()
     patch: tuple[tuple[float, float], tuple[float, float]] | None = None
+
+    @property
+    def contact_law(self) -> ContactLaw:
+        """The part's compliance law p (role contact), from ``law`` and its parameters."""
+        law = CONTACT_LAWS[self.law]
+        return law(**{key: getattr(self, key) for key in law.keys()})
 
     def traction_at(self, t: float) -> tuple[float, ...]:
         """Traction vector at time ``t`` (left-continuous at jumps)."""
@@ -180,7 +179,7 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
     if "role" not in b:
         raise ctx.fail(f"{sec}.role", "<missing>", "allowed: " + ", ".join(ROLES))
     role = string(ctx, f"{sec}.role", b["role"], ROLES)
-    for key in ("traction", "displacement", *_CONTACT_KEYS):
+    for key in ("traction", "displacement", *CONTACT_KEYS):
         if key in b and key not in _PER_ROLE[role]:
             raise ctx.fail(f"{sec}.{key}", b[key], f"not used by role '{role}'")
     side, interval, patch = "", None, None
@@ -209,7 +208,7 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
     if role == "displacement":
         return replace(part, displacement=_displacement(ctx, f"{sec}.displacement", b, dim))
     if role == "contact":
-        return _contact(ctx, sec, b, part, mesh, dim)
+        return replace(part, **contact_values(ctx, sec, b, side, mesh, dim))
     return part
 
 
@@ -256,99 +255,6 @@ def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, 
     if all(c is None for c in comps):
         raise ctx.fail(key, v, "every component is 'free': give at least one value (or drop the part)")
     return tuple(comps)
-
-
-def _contact(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig, dim: int) -> BoundaryConfig:
-    law = string(ctx, f"{sec}.law", b.get("law", "linear"), LAWS)
-    for key in ("mu", "coefficient", "exponent", "depth", "mu_stiff"):
-        if key in b and key not in _LAW_KEYS[law]:
-            raise ctx.fail(f"{sec}.{key}", b[key], f"not used by law '{law}' (it takes {', '.join(_LAW_KEYS[law])})")
-    values: dict[str, Any] = {"law": law}
-    if law in ("linear", "limited_penetration"):
-        if law == "limited_penetration" and "mu" not in b:
-            raise ctx.fail(f"{sec}.mu", "<missing>", "law 'limited_penetration' needs mu (the layer), depth")
-        mu = number(ctx, f"{sec}.mu", b.get("mu", 1e-10))
-        need(ctx, f"{sec}.mu", mu, mu > 0, "must be > 0 (deformability of the foundation)")
-        values["mu"] = mu
-    if law == "power":
-        for key in ("coefficient", "exponent"):
-            if key not in b:
-                raise ctx.fail(f"{sec}.{key}", "<missing>", "law 'power' needs coefficient c and exponent m: p(r) = c r_+^m")
-        c = number(ctx, f"{sec}.coefficient", b["coefficient"])
-        need(ctx, f"{sec}.coefficient", c, c > 0, "must be > 0")
-        m = number(ctx, f"{sec}.exponent", b["exponent"])
-        need(ctx, f"{sec}.exponent", m, m >= 1, "must be >= 1 (p monotone and C^1 for m > 1)")
-        values.update(coefficient=c, exponent=m)
-    if law == "limited_penetration":
-        if "depth" not in b:
-            raise ctx.fail(f"{sec}.depth", "<missing>", "law 'limited_penetration' needs depth (the layer's thickness)")
-        depth = number(ctx, f"{sec}.depth", b["depth"])
-        need(ctx, f"{sec}.depth", depth, depth > 0, "must be > 0")
-        mu_stiff = number(ctx, f"{sec}.mu_stiff", b.get("mu_stiff", 1e-10))
-        need(ctx, f"{sec}.mu_stiff", mu_stiff, 0 < mu_stiff <= values["mu"],
-             f"must be in (0, mu = {values['mu']}]: the foundation under the layer is the stiffer one")
-        values.update(depth=depth, mu_stiff=mu_stiff)
-    gap = b.get("gap", 0.0)
-    if "obstacle" in b:
-        if "gap" in b or "gap_coordinate" in b or "gap_interpolation" in b:
-            raise ctx.fail(f"{sec}.obstacle", b["obstacle"], "an obstacle replaces gap, gap_coordinate, gap_interpolation")
-        values["obstacle"] = _obstacle(ctx, f"{sec}.obstacle", b["obstacle"], dim)
-    elif isinstance(gap, list):
-        values["gap_interpolation"] = string(ctx, f"{sec}.gap_interpolation", b.get("gap_interpolation", "linear"),
-                                             INTERPOLATIONS)
-        values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap)
-        values["gap_coordinate"] = _gap_coordinate(ctx, sec, b, part, mesh, dim)
-    else:
-        values["gap"] = number(ctx, f"{sec}.gap", gap)
-        if "gap_coordinate" in b:
-            raise ctx.fail(f"{sec}.gap_coordinate", b["gap_coordinate"], "only with a gap table [[s, g], ...]")
-        if "gap_interpolation" in b:
-            raise ctx.fail(f"{sec}.gap_interpolation", b["gap_interpolation"], "only with a gap table [[s, g], ...]")
-    return replace(part, **values)
-
-
-def _obstacle(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[str, Any], ...]:
-    """{shape = "plane", point, normal} or {shape = "circle" (2-D) | "sphere" (3-D), centre, radius}."""
-    if not isinstance(v, dict):
-        raise ctx.fail(key, v, "must be a table {shape = 'plane' | 'circle' | 'sphere', ...}")
-    shape = string(ctx, f"{key}.shape", v.get("shape"), tuple(OBSTACLES))
-    need(ctx, f"{key}.shape", shape, shape != ("sphere" if dim == 2 else "circle"),
-         "a circle is 2-D, a sphere 3-D")
-    check_keys(ctx, key, v, ("shape", *OBSTACLES[shape]))
-    out: list[tuple[str, Any]] = [("shape", shape)]
-    for name in OBSTACLES[shape]:
-        if name not in v:
-            raise ctx.fail(f"{key}.{name}", "<missing>", f"a {shape} needs " + ", ".join(OBSTACLES[shape]))
-        if name == "radius":
-            r = number(ctx, f"{key}.radius", v[name])
-            need(ctx, f"{key}.radius", r, r > 0, "must be > 0")
-            out.append((name, r))
-        else:
-            vec = vector(ctx, f"{key}.{name}", v[name], dim)
-            if name == "normal":
-                need(ctx, f"{key}.normal", list(vec), any(c != 0.0 for c in vec), "must not be zero")
-            out.append((name, vec))
-    return tuple(out)
-
-
-def _gap_table(ctx: Ctx, key: str, v: list) -> tuple[tuple[float, float], ...]:
-    if not v or not all(isinstance(r, list) for r in v):
-        raise ctx.fail(key, v, "must be a number or a table of rows [s, g] (piecewise linear in s)")
-    rows = tuple(vector(ctx, f"{key}[{i}]", r, 2) for i, r in enumerate(v))
-    s = [r[0] for r in rows]
-    if any(b <= a for a, b in zip(s, s[1:])):
-        raise ctx.fail(key, s, "the coordinates s must increase strictly")
-    return rows  # type: ignore[return-value]
-
-
-def _gap_coordinate(ctx: Ctx, sec: str, b: dict, part: BoundaryConfig, mesh: MeshConfig, dim: int) -> str:
-    """x along a horizontal side, y along a vertical one; required on gmsh parts."""
-    if "gap_coordinate" in b:
-        return string(ctx, f"{sec}.gap_coordinate", b["gap_coordinate"], AXES[:dim])
-    if mesh.kind != "rectangle":  # a box face has two tangential coordinates: say which
-        raise ctx.fail(f"{sec}.gap_coordinate", "<missing>",
-                       f"a gap table on a {mesh.kind} part needs gap_coordinate = " + " | ".join(f"'{a}'" for a in AXES[:dim]))
-    return "x" if part.side in ("bottom", "top") else "y"
 
 
 def _check_overlaps(ctx: Ctx, parts: list[BoundaryConfig], mesh: MeshConfig) -> None:
@@ -405,8 +311,7 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
             else:
                 entry["gap"] = b.gap
             entry["law"] = b.law
-            for key in _LAW_KEYS[b.law]:
-                entry[key] = getattr(b, key)
+            entry.update(b.contact_law.parameters())
         out[b.name] = entry
     return out
 

@@ -1,10 +1,10 @@
 """Frictionless normal compliance on the contact parts (docs/model.md §1, §3.3): -sigma_nu = p(u_nu - g).
 
-The law p of each part (``law``): linear p(r) = r_+ / mu (the paper's), power p(r) = c r_+^m,
-or limited penetration p(r) = r_+ / mu + (r - d)_+ / mu_stiff. UFL differentiates
-``max_value`` to the Heaviside, which is the semismooth Newton's generalized derivative
-(H(u_nu - g) / mu for the linear law). The gap is a number, a table or an obstacle, the same values here
-(a field exact at the contact quadrature points) and at the points (:mod:`solver.physics.gap`).
+The law p of each part is its :attr:`BoundaryConfig.contact_law` (solver/laws/contact.py: linear, power, limited
+penetration, ...), whose UFL form is integrated here. UFL differentiates ``max_value`` to the Heaviside, which is
+the semismooth Newton's generalized derivative (H(u_nu - g) / mu for the linear law). The gap is a number, a table
+or an obstacle, the same values here (a field exact at the contact quadrature points) and at the points
+(:mod:`solver.physics.gap`).
 """
 
 from __future__ import annotations
@@ -17,23 +17,20 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
+from solver.laws.contact import LinearLaw
 from solver.mesh.geometry import Geometry
 from solver.physics.gap import gap_function, gap_values  # noqa: F401  (gap_values: re-exported)
 from solver.physics.operators import assemble_without_diagonal
 
 
-def normal_compliance(r, mu: float):
-    """p(r) = max(r, 0) / mu."""
-    return ufl.max_value(r, 0.0) / mu
+def normal_compliance(r: ufl.core.expr.Expr, mu: float) -> ufl.core.expr.Expr:
+    """p(r) = max(r, 0) / mu (the linear law)."""
+    return LinearLaw(mu).ufl(r)
 
 
 def compliance(r: ufl.core.expr.Expr, part: BoundaryConfig) -> ufl.core.expr.Expr:
-    """p(r) of the part's law (linear: exactly :func:`normal_compliance`)."""
-    if part.law == "linear":
-        return normal_compliance(r, part.mu)
-    if part.law == "power":
-        return part.coefficient * ufl.max_value(r, 0.0) ** part.exponent
-    return normal_compliance(r, part.mu) + ufl.max_value(r - part.depth, 0.0) / part.mu_stiff
+    """p(r) of the part's law, its UFL form."""
+    return part.contact_law.ufl(r)
 
 
 def penetration(u, n, gap):
@@ -74,8 +71,8 @@ class ContactTerm:
     With the linear and limited-penetration laws the problem is piecewise linear, so C changes
     only when the active set does; with the power law it changes with u. A fingerprint C r
     (r a fixed random vector) tells whether C changed: a missed change could cost Newton
-    iterations, never accuracy (the residual decides convergence). ``piecewise_linear``: no part has
-    the power law, so a Newton iterate depends only on the active set it was computed from.
+    iterations, never accuracy (the residual decides convergence). ``piecewise_linear``: every part's law is
+    piecewise linear, so a Newton iterate depends only on the active set it was computed from.
     """
 
     def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
@@ -92,18 +89,18 @@ class ContactTerm:
         self._probe.setRandom(PETSc.Random().create(comm=geo.comm))
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
-        self.piecewise_linear = all(p.law != "power" for p in parts)
+        self.piecewise_linear = all(p.contact_law.piecewise_linear for p in parts)
         # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
-        # the power law has no fixed stiffness (p'(r) = c m r^(m-1)) and is left out
-        stiff = [p for p in parts if p.law in ("linear", "limited_penetration")]
-        self._normal_form = fem.form(sum((1.0 / p.mu) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
-                                         for p in stiff)) if stiff else None
+        # a law without a fixed stiffness (power: p'(r) = c m r^(m-1)) is left out
+        stiff = [(p, p.contact_law.stiffness) for p in parts if p.contact_law.stiffness is not None]
+        self._normal_form = fem.form(sum(k * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
+                                         for p, k in stiff)) if stiff else None
 
     def normal_stiffness(self, out: PETSc.Vec) -> None:
         """out = int_Gamma_C (1/mu) n . w ds, ghosts included: at each node of Gamma_C a vector along the normal (the
         facet normals averaged with the weights int phi_i ds) whose length is the scale (1/mu) int phi_i ds of the
-        contact's stiffness there (the linear and limited-penetration laws' 1/mu); zero elsewhere and on parts with
-        the power law. The iterative solver's near-nullspace reads it (newton.contact_normals)."""
+        contact's stiffness there (the law's :attr:`~solver.laws.contact.ContactLaw.stiffness`, 1/mu); zero elsewhere
+        and on parts whose law has none (power). The iterative solver's near-nullspace reads it (newton.contact_normals)."""
         with out.localForm() as local:
             local.set(0.0)
         if self._normal_form is not None:

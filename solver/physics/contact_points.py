@@ -12,17 +12,9 @@ import scipy.sparse as sp
 from mpi4py import MPI
 
 from solver.config import BoundaryConfig
+from solver.laws.contact import PointLaws
 from solver.mesh.geometry import Geometry
 from solver.physics.contact import gap_values
-
-
-def _law_row(part: BoundaryConfig) -> tuple[float, float, float, float, float]:
-    """(1/mu, depth, 1/mu_stiff, c, m) of a part's law; see :meth:`ContactPoints.pressure`."""
-    if part.law == "power":
-        return 0.0, np.inf, 0.0, part.coefficient, part.exponent
-    if part.law == "limited_penetration":
-        return 1.0 / part.mu, part.depth, 1.0 / part.mu_stiff, 0.0, 1.0
-    return 1.0 / part.mu, np.inf, 0.0, 0.0, 1.0
 
 
 def _facet_frame(facet_vertices, cell_vertices: list, dofs, x: np.ndarray):
@@ -53,24 +45,11 @@ def _facet_basis(element, x: np.ndarray, dofs, da, db, s: np.ndarray) -> list:
     return [tuple(zip(dofs, phi[q])) for q in range(len(s))]
 
 
-def law_pressure(r: np.ndarray, inv_mu: np.ndarray, depth: np.ndarray, inv_mu_stiff: np.ndarray,
-                 coefficient: np.ndarray, exponent: np.ndarray) -> np.ndarray:
-    """p(r) per point from the law's columns (:func:`_law_row`): r_+ / mu, plus (r - depth)_+ / mu_stiff where the
-    depth is finite; c r_+^m where c > 0 (the power law)."""
-    p = np.maximum(r, 0.0) * inv_mu
-    m = np.isfinite(depth)
-    if m.any():
-        p[m] += np.maximum(r[m] - depth[m], 0.0) * inv_mu_stiff[m]
-    m = coefficient > 0
-    if m.any():
-        p[m] = coefficient[m] * np.maximum(r[m], 0.0) ** exponent[m]
-    return p
-
-
 class ContactPoints:
     """The contact term at its quadrature points: u_nu - g = N u - g and j(u) = N^T W p(N u - g).
 
-    The gap g and the law p are evaluated per point as the UFL term does (same ramps, same laws).
+    The gap g and the law p are evaluated per point as the UFL term does (same ramps; ``laws``: each part's
+    :attr:`~solver.config.BoundaryConfig.contact_law` on its points, in its numpy form).
 
     N (sparse, local dofs incl. ghosts -> points of the facets this rank integrates) and the
     weights W reproduce the ``ds`` rule of :func:`residual` exactly, so every method works on
@@ -96,7 +75,7 @@ class ContactPoints:
         # P2 and above: the cell's basis at the points (basix orders vertex dofs first, as the cell's vertices)
         element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, degree_u,
                                        basix.LagrangeVariant.gll_warped) if degree_u > 1 else None
-        rows, cols, vals, weights, gaps, coords, law = [], [], [], [], [], [], []
+        rows, cols, vals, weights, gaps, coords, runs = [], [], [], [], [], [], []
         npts = 0
         for part in parts:
             first = npts
@@ -117,19 +96,15 @@ class ContactPoints:
                     npts += 1
             xq = np.array(coords[first:]).reshape(-1, 3)
             gaps.append(gap_values(part, xq))
-            law.append(np.array([_law_row(part)] * (npts - first)).reshape(-1, 5))
+            runs.append((part.contact_law, npts - first))
         size = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
         self.N = sp.csr_matrix((vals, (rows, cols)), shape=(npts, size))
         self.NT = self.N.T.tocsr()
         self.W = np.asarray(weights)
         self.x = np.array(coords).reshape(-1, 3)  # the points (for tests and pictures)
         self.g = np.concatenate(gaps) if gaps else np.zeros(0)
-        law_rows = np.concatenate(law) if law else np.zeros((0, 5))
-        # per point: 1/mu (linear and limited penetration; 0 for power), depth d and 1/mu_stiff
-        # (limited penetration; d = inf otherwise), c and m (power; c = 0 otherwise)
-        self.inv_mu, self.depth, self.inv_mu_stiff, self.coefficient, self.exponent = law_rows.T.copy()
-        self.limited = np.isfinite(self.depth)
-        self.power = self.coefficient > 0
+        self.laws = PointLaws(tuple(runs))
+        self.inv_mu = self.laws.column(lambda law: law.stiffness)  # per point: 1/mu (0 where the law has none)
         self.comm = geo.comm
 
     def penetration(self, u_local) -> np.ndarray:
@@ -137,8 +112,8 @@ class ContactPoints:
         return self.N @ u_local - self.g
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
-        """p(r) at the points, each with its part's law (the linear law: r_+ / mu, as in the UFL term)."""
-        return law_pressure(r, self.inv_mu, self.depth, self.inv_mu_stiff, self.coefficient, self.exponent)
+        """p(r) at the points, each with its part's law."""
+        return self.laws.pressure(r)
 
     def max_penetration(self, u_local) -> float:
         r = self.penetration(u_local)

@@ -176,12 +176,7 @@ class DisplacementDiagnostics:
 
 def allowed_penetration(part: BoundaryConfig, pressure: float) -> float:
     """The penetration r at which the part's law reaches ``pressure`` (p(r) = pressure; linear: mu p)."""
-    if part.law == "power":
-        return (pressure / part.coefficient) ** (1.0 / part.exponent)
-    r = part.mu * pressure
-    if part.law == "limited_penetration" and r > part.depth:  # p = r/mu + (r - d)/mu_s beyond the layer
-        r = (pressure + part.depth / part.mu_stiff) / (1.0 / part.mu + 1.0 / part.mu_stiff)
-    return r
+    return part.contact_law.inverse(pressure)
 
 
 def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], errors: dict[str, float], pressure: float) -> None:

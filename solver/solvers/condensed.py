@@ -44,7 +44,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import SolverConfig
-from solver.physics.contact_points import ContactPoints, law_pressure
+from solver.laws.contact import PointLaws
+from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
@@ -142,10 +143,9 @@ class PointContact:
         self.g = points.g
         self.comm = comm
         self.W = self._gathered(points.W)
-        self.inv_mu, self.depth = self._gathered(points.inv_mu), self._gathered(points.depth)
-        self.inv_mu_stiff = self._gathered(points.inv_mu_stiff)
-        self.limited = np.isfinite(self.depth)
-        self._none = np.zeros(self.q)  # the power law's c and m: no point has it (applies)
+        # every point's law, rank by rank (the points' order in N_B); all piecewise linear (applies)
+        self.laws = PointLaws.join(comm.allgather(points.laws)) if comm.size > 1 else points.laws
+        self.inv_mu = self.laws.column(lambda law: law.stiffness)
         self.c = np.zeros(self.q)
 
     def _gathered(self, a: np.ndarray) -> np.ndarray:
@@ -155,36 +155,29 @@ class PointContact:
 
     @staticmethod
     def applies(points: ContactPoints | None) -> bool:
-        """Whether every point has a piecewise linear law (no power law)."""
-        return points is not None and not points.power.any()
+        """Whether every point has a piecewise linear law."""
+        return points is not None and points.laws.piecewise_linear
 
     def level(self, x: np.ndarray) -> None:
         """c for the level: x is u0's local array (ghosts included), whose values on B are left out."""
         self.c = self._gathered(self.N_rest @ np.where(self.on_b, 0.0, x) - self.g)
 
     def state(self, r: np.ndarray) -> np.ndarray:
-        """Per point: 0 no contact, 1 in contact, 2 beyond a limited-penetration depth (the active set)."""
-        s = (r > 0.0).astype(np.int8)
-        if self.limited.any():
-            s += (self.limited & (r > self.depth)).astype(np.int8)
-        return s
+        """Per point: the piece of its law r is on, 0 no contact (the active set)."""
+        return self.laws.state(r)
 
     def slopes(self, state: np.ndarray) -> np.ndarray:
         """W p'(r) per point for an active set."""
-        k = np.where(state > 0, self.inv_mu, 0.0)
-        return self.W * np.where(state > 1, k + self.inv_mu_stiff, k)
+        return self.W * self.laws.piece_slope(state)
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
         """p(r) at the points (ContactPoints' law)."""
-        return law_pressure(r, self.inv_mu, self.depth, self.inv_mu_stiff, self._none, self._none)
+        return self.laws.pressure(r)
 
     def piece_force(self, r: np.ndarray, state: np.ndarray) -> np.ndarray:
-        """j_B of an active set's quadratic piece at r: the law taken affine on the set's points (r/mu where in
-        contact, plus (r - depth)/mu_stiff beyond the depth), zero off it; j_B itself where the set is r's."""
-        p = np.where(state > 0, r * self.inv_mu, 0.0)
-        if self.limited.any():
-            p = p + np.where(state > 1, (r - self.depth) * self.inv_mu_stiff, 0.0)
-        return self.NBT @ (self.W * p)
+        """j_B of an active set's quadratic piece at r: each point's law taken affine on its piece, zero off
+        contact; j_B itself where the set is r's."""
+        return self.NBT @ (self.W * self.laws.piece_pressure(r, state))
 
     def force(self, r: np.ndarray) -> np.ndarray:
         """j_B at the points' r."""
@@ -196,11 +189,7 @@ class PointContact:
 
     def kinks(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The lam in (0, 1) where r + lam s crosses a kink of p, sorted."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lam = [-r / s]
-            if self.limited.any():
-                lam.append(np.where(self.limited, (self.depth - r) / s, np.nan))
-        lam = np.concatenate(lam)
+        lam = self.laws.crossings(r, s)
         return np.unique(lam[np.isfinite(lam) & (lam > 0.0) & (lam < 1.0)])
 
     def line_minimum(self, alpha: float, beta: float, r: np.ndarray, s: np.ndarray) -> tuple[float, np.ndarray]:

@@ -131,7 +131,7 @@ class PenaltyDualitySolver(ContactIteration):
         """K + omega N^T W N, assembled as the UFL penalty term on the contact facets."""
         ops, s = self.problem.ops, self.settings
         n = ufl.FacetNormal(self.geo.mesh)
-        a_pen = fem.form(sum((s.penalty_duality_omega / p.mu) * ufl.dot(ops.du, n) * ufl.dot(ops.w, n)
+        a_pen = fem.form(sum((s.penalty_duality_omega / p.contact_law.compliance) * ufl.dot(ops.du, n) * ufl.dot(ops.w, n)
                              * self.geo.ds(self.geo.tags[p.name], metadata={"quadrature_degree": s.contact_quadrature_degree})
                              for p in self.parts))
         P = fpetsc.create_matrix(a_pen)
@@ -149,19 +149,9 @@ class PenaltyDualitySolver(ContactIteration):
     def after_solve(self) -> None:
         """q+ = Yosida approximation of G - omega I at (r + lambda q), with lambda omega = 1/2.
 
-        r solves y = (1 - lambda omega) r + lambda p(r): piecewise linear in r with kinks at 0
-        and, for limited penetration, at the depth d, so it is inverted piece by piece.
+        r solves y = (1 - lambda omega) r + lambda p(r): piecewise linear in r, inverted piece by piece by each
+        point's law (:meth:`solver.laws.contact.PiecewiseLinearLaw.resolvent`).
         """
-        pts = self.points
-        lam, omega, inv_mu = self.lam, self.omega, pts.inv_mu
-        y = pts.penetration(self.problem.u.x.array) + lam * self.q
-        r = np.where(y >= 0, y / (1 - lam * omega + lam * inv_mu), y / (1 - lam * omega))
-        if pts.limited.any():
-            m = pts.limited
-            a1 = 1 - lam * omega[m] + lam * inv_mu[m]
-            yd = a1 * pts.depth[m]
-            deep = y[m] > yd
-            r_m = r[m]
-            r_m[deep] = (pts.depth[m] + (y[m] - yd) / (a1 + lam * pts.inv_mu_stiff[m]))[deep]
-            r[m] = r_m
-        self.q = (y - r) / lam
+        y = self.points.penetration(self.problem.u.x.array) + self.lam * self.q
+        r = self.points.laws.resolvent(y, self.lam, self.omega)
+        self.q = (y - r) / self.lam

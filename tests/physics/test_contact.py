@@ -204,7 +204,10 @@ def test_contact_points_reproduce_the_ufl_term_for_every_law_and_a_varying_gap(c
     m.mech.solve(0.0)
     pts = ContactPoints(m.geo, m.u.function_space, cfg.contact, cfg.solver.contact_quadrature_degree)
     r = pts.penetration(m.u.x.array)
-    assert comm.allreduce(int((r > pts.depth).sum()), op=MPI.SUM) > 0  # the stiff part of the second law acts
+    (power, _), (limited, n) = pts.laws.runs  # bottom's points, then bottom2's
+    assert power == cfg.contact[0].contact_law and limited == cfg.contact[1].contact_law
+    deep = r[r.size - n:] > limited.depth  # the stiff part of the second law acts
+    assert comm.allreduce(int(deep.sum()), op=MPI.SUM) > 0
     F, G = contact_residuals(m, pts.forces(pts.pressure(r)))
     assert (F - G).norm() <= 1e-12 * F.norm()
     total = comm.allreduce(float((pts.W * pts.pressure(r)).sum()), op=MPI.SUM)
