@@ -8,9 +8,10 @@ of m terms carries an error of at most gamma_m = m u / (1 - m u) times the sum o
 Accuracy and Stability, §3.1), u the unit round-off. The two sides sum the same terms in different orders
 (per-cell kernels and a product with the assembled K, against one kernel of the whole form), so they differ by at
 most 2 gamma_m times that sum of magnitudes. The magnitudes are bounded row by row: the stiffness part by
-(|K_full| 1)_i ||x||_inf (|K_full| the entrywise absolute values, without Dirichlet rows replaced: the lifting is
-part of the sum; a row sum, not |K||x|, since an entry of K may be a near-cancellation of cell contributions), the
-loads, the contact term and the memory sum by the absolute values of their assembled vectors (the memory sum by
+(|K_full| 1)_i (||x||_inf + ||d||_inf) (|K_full| the entrywise absolute values, without Dirichlet rows replaced,
+d = g_n - x on the Dirichlet dofs: the lifting is part of the sum; a row sum, not |K||x|, since an entry of K may be a
+near-cancellation of cell contributions), the loads (the body force f0_n included, in the scenes without contact),
+the contact term and the memory sum by the absolute values of their assembled vectors (the memory sum by
 |B| |M_n|), the implicit term by (k/2) g(0) |B| L (|zeta Phi_L| <= L), the Jacobian by the row sums of |K_full|,
 |J_ref| and |J|. m = MAX_TERMS_PER_ROW x (the largest number of nonzeros in a row of K): per column, the products
 of the quadrature points of the cells the column's node shares with the row's, at most 8 here. The bound is an upper
@@ -32,6 +33,8 @@ from solver.run.model import build_model
 MAX_TERMS_PER_ROW = 8
 LOAD_2D = [[0.0, -10.0, -10.0], [1.0, -20.0, 0.0]]  # a traction that changes between levels: b_n does too
 LOAD_3D = [[0.0, -10.0, 0.0, -10.0], [1.0, -20.0, 5.0, 0.0]]
+GRAVITY_2D = [[0.0, 0.0, -1.0], [1.0, 2.0, -3.0]]  # a body force f0(t) (the scenes without contact)
+GRAVITY_3D = [[0.0, 0.0, 0.0, -1.0], [1.0, 2.0, 1.0, -3.0]]
 CONTACT = {"role": "contact", "gap": 0.0, "mu": 1e-10}
 # the top moves down, its x free: Dirichlet values that differ from zero and between levels (the lifting)
 MOVING = [[0.0, 0.0], [1.0, -0.004]]
@@ -48,7 +51,8 @@ def _scene(dim: int, contact: bool, implicit: bool) -> dict:
     else:
         mesh = {"kind": "box", "corners": [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], "nx": 2, "ny": 2, "nz": 2}
         material = {"model": "3d"}
-    return {"mesh": mesh, "material": material, "boundary": boundary, "damage": {"enabled": False},
+    scene = {"body_force": {"f": GRAVITY_2D if dim == 2 else GRAVITY_3D}} if not contact else {}
+    return {**scene, "mesh": mesh, "material": material, "boundary": boundary, "damage": {"enabled": False},
             "memory": {"kernel": "constant", "L": L, "rule": "trapezoid" if implicit else "left"},
             "time": {"T": 1.0, "k": 0.25}, "solver": {"method": "newton"}}
 
@@ -136,7 +140,9 @@ def _residual_bound(model, forms: LevelForms, x: PETSc.Vec) -> np.ndarray:
     """Row by row: 2 gamma_m times the bound of the magnitudes of F_i's terms (module docstring)."""
     ops = model.mech.ops
     K_full = _matrix(forms.stiffness)
-    scale = _row_sums(K_full) * model.comm.allreduce(float(np.abs(x.array_r).max(initial=0.0)), op=MPI.MAX)
+    d = _lifting_shift(model, x)
+    sizes = [float(np.abs(v.array_r).max(initial=0.0)) for v in (x, d.vector)]
+    scale = _row_sums(K_full) * sum(model.comm.allreduce(v, op=MPI.MAX) for v in sizes)
     for term in (forms.loads, forms.contact):
         if term is not None:
             scale += np.abs(_vector(model, term).array)
@@ -153,21 +159,25 @@ def _residual_bound(model, forms: LevelForms, x: PETSc.Vec) -> np.ndarray:
     return _gamma(model) * scale
 
 
+def _lifting_shift(model, x: PETSc.Vec) -> fem.Function:
+    """d = g_n - x on the Dirichlet dofs, 0 elsewhere."""
+    d = fem.Function(model.u.function_space)
+    d.x.array[:] = 0.0
+    fpetsc.set_bc(d.vector, model.mech.problem.bcs, x, 1.0)
+    d.x.scatter_forward()
+    return d
+
+
 def _reference_residual(model, forms: LevelForms, x: PETSc.Vec) -> PETSc.Vec:
     """F(x; w) assembled from the UFL reference, the Dirichlet values of t_n entering through the stiffness alone
-    (the lifting: a(x + d, w), d = g_n - x on the Dirichlet dofs, 0 elsewhere; the nonlinear terms at x), the
-    Dirichlet rows x - g_n. Where x holds g_n (a Newton iterate) this is F(x; w) itself."""
-    problem = model.mech.problem
+    (the lifting: a(x + d, w), d = g_n - x on the Dirichlet dofs; the nonlinear terms at x), the Dirichlet rows
+    x - g_n. Where x holds g_n (a Newton iterate) this is F(x; w) itself."""
     u = model.u
     x.copy(u.vector)
     u.x.scatter_forward()
     F = _vector(model, forms.residual)
-    d = fem.Function(u.function_space)
-    d.x.array[:] = 0.0
-    fpetsc.set_bc(d.vector, problem.bcs, x, 1.0)  # g_n - x on the Dirichlet dofs
-    d.x.scatter_forward()
-    F.axpy(1.0, _vector(model, ufl.action(forms.stiffness, d)))
-    fpetsc.set_bc(F, problem.bcs, x, -1.0)
+    F.axpy(1.0, _vector(model, ufl.action(forms.stiffness, _lifting_shift(model, x))))
+    fpetsc.set_bc(F, model.mech.problem.bcs, x, -1.0)
     return F
 
 
