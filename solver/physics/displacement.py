@@ -1,11 +1,12 @@
-"""The nonlinear system of one time level, F(u) = 0, that every contact method solves (docs/model.md §3.3).
+"""The fast evaluation of one time level's problem F(u) = 0, which every contact method solves (docs/model.md §3.3).
 
-    F(u) = K u + j(u, .) [+ F_m(u)] - b_n,      J = K + C(active set) [+ dF_m/du]
+The problem itself, F(u; w) and J = dF/du in UFL, is declared in :mod:`solver.physics.level`. Here it is
+evaluated through its split, where it has one (:class:`FixedSplit`):
 
-K and B are fixed (:mod:`operators`), j is the contact term (:class:`contact.ContactTerm`) and
-F_m the optional implicit memory term of the trapezoidal rule (docs/model.md §3.4). The
-residual of the converged level is carried to the next one: there K u + j(u) is unchanged,
-so F_0 = F(u_{n-1}) + b_{n-1} - b_n exactly, without a matrix product or an assembly.
+    F(u) = K u + j(u, .) - b_n,      J = K + C(active set)
+
+K and b_n from :mod:`operators`, j and C from :class:`contact.ContactTerm`. The implicit memory term
+F_m of the trapezoidal rule (docs/model.md §3.4) adds F_m(u) to F and dF_m/du to J, and removes the split.
 """
 
 from __future__ import annotations
@@ -37,10 +38,10 @@ class SolveInfo:
 
 class StiffnessRows:
     """K's rows where the contact Jacobian C can be nonzero (its pattern's rows), kept apart so that the Jacobian
-    J = K + C can live in K's own storage (issue 30: one stiffness-pattern matrix instead of two, 0.5 KB per 3-D
-    dof). Off these rows J is K exactly, bit for bit; on them :meth:`restore` writes K's values back before the
-    next C is added, and :meth:`mult_add` forms K x there from the rows kept here. A few rows: those of the cells
-    on Gamma_C."""
+    J = K + C lives in K's own storage (one stiffness-pattern matrix, not two: memory). It relies on the split
+    (:class:`FixedSplit`): only C changes with u. Off these rows J is K exactly, bit for bit; on them
+    :meth:`restore` writes K's values back before the next C is added, and :meth:`mult_add` forms K x there
+    from the rows kept here. A few rows: those of the cells on Gamma_C."""
 
     def __init__(self, K: PETSc.Mat, contact: ContactTerm, bcs) -> None:
         C = contact.C
@@ -73,38 +74,89 @@ class StiffnessRows:
         sc.scatter(Fc, F, addv=PETSc.InsertMode.INSERT_VALUES, mode=PETSc.ScatterMode.REVERSE)
 
 
-class DisplacementProblem:
-    """Residual and Jacobian of the level's displacement problem, and the state carried between levels.
+@dataclass(frozen=True)
+class FixedSplit:
+    """The capability F(u) = K u + j(u, .) - b_n with K fixed over the run (``DisplacementProblem.split``).
 
-    ``carried`` is True when ``F_last`` holds F(u_{n-1}) for ``b_prev`` (the last level converged):
-    the next level's first residual then follows from it.
+    What relies on it: :class:`StiffnessRows` (J = K + C in K's storage: only C changes with u); the residual
+    carried between levels (K u + j(u) does not depend on the level, so F_0 = F(u_{n-1}) + b_{n-1} - b_n without
+    a product or an assembly); the condensed iteration (solvers/condensed.py: K factored once, j acting on the
+    contact dofs alone). The implicit memory term F_m(u) has no such split: a problem with it offers none.
+    """
+
+    K: PETSc.Mat
+    contact: ContactTerm | None
+    operators: Operators
+
+    @property
+    def b(self) -> PETSc.Vec:
+        """b_n of the current level (the operators swap b and b_prev at each level)."""
+        return self.operators.b
+
+
+class DisplacementProblem:
+    """Residual and Jacobian of the level's problem (declared in :mod:`solver.physics.level`), and the residual
+    carried between levels.
+
+    ``split``: the :class:`FixedSplit` the fast paths rely on, None with the implicit memory term.
+    The carried residual is the problem's own contract: a method calls :meth:`level_converged` when a level
+    converged (``F_last`` then holds F(u_n) for b_n, and the next level's first residual follows from it) and
+    :meth:`forget_level` when it did not; ``carried`` tells which was last.
     """
 
     def __init__(self, u: fem.Function, ops: Operators, contact: ContactTerm | None, implicit_term=None) -> None:
         self.u, self.ops, self.contact = u, ops, contact
         self.bcs = ops.bcs
+        # F_m(u; w) (UFL), its compiled form and its Jacobian's: nonlinear in u_n, re-assembled at every evaluation
+        self.implicit_memory = implicit_term(u, ops.w) if implicit_term is not None else None
         self.Fm = self.am = self.Am = None
-        if implicit_term is not None:  # nonlinear in u_n: re-assembled at every evaluation
-            Fm = implicit_term(u, ops.w)
-            self.Fm, self.am = fem.form(Fm), fem.form(ufl.derivative(Fm, u, ops.du))
+        if self.implicit_memory is not None:
+            self.Fm = fem.form(self.implicit_memory)
+            self.am = fem.form(ufl.derivative(self.implicit_memory, u, ops.du))
             self.Am = ops.K.duplicate()
-        # with contact only, J = K + C shares K's storage (StiffnessRows keeps K's rows under C); with the implicit
-        # memory term, whose Jacobian touches every row, J is a copy of K
-        self.kept = StiffnessRows(ops.K, contact, self.bcs) if contact is not None and self.Fm is None else None
-        self.J = ops.K.duplicate(copy=True) if self.Fm is not None else ops.K
+        self.split = FixedSplit(ops.K, contact, ops) if self.Fm is None else None
+        # with the split and contact, J = K + C shares K's storage (StiffnessRows keeps K's rows under C); with the
+        # implicit memory term, whose Jacobian touches every row, J is a copy of K
+        self.kept = StiffnessRows(ops.K, contact, self.bcs) if contact is not None and self.split is not None else None
+        self.J = ops.K.duplicate(copy=True) if self.split is None else ops.K
         # with the truncation acting, the implicit memory term's Jacobian is not symmetric
-        self.symmetric = self.Fm is None
+        self.symmetric = self.split is not None
         self.J.setOption(PETSc.Mat.Option.SYMMETRIC, self.symmetric)
         self.nonlinear = contact is not None or self.Fm is not None
         self.r = ops.b.duplicate()
         self.F_last = ops.b.duplicate()  # the residual at the last evaluated iterate
         self.contact_norm = 0.0  # ||j(u, .)|| at the last evaluation
-        self.carried = False
+        self._carried = False
 
     @property
     def b(self) -> PETSc.Vec:
         return self.ops.b
 
+    # ------------------------------------------------------------------ the carried residual
+    @property
+    def carried(self) -> bool:
+        """True when the last level converged: ``F_last`` holds F(u_{n-1}) for ``b_prev``."""
+        return self._carried
+
+    @carried.setter
+    def carried(self, converged: bool) -> None:
+        """The assignment the methods used before :meth:`level_converged` / :meth:`forget_level` (same effect)."""
+        self._carried = bool(converged)
+
+    def level_converged(self) -> None:
+        """The level converged at the last evaluated iterate: the next level starts from its residual."""
+        self._carried = True
+
+    def forget_level(self) -> None:
+        """The level failed (or was abandoned): the next level evaluates its first residual in full."""
+        self._carried = False
+
+    def resume(self, carried: bool, contact_norm: float) -> None:
+        """The carried state of a checkpointed run (``F_last`` and b restored in place by the caller)."""
+        self._carried = bool(carried)
+        self.contact_norm = float(contact_norm)
+
+    # ------------------------------------------------------------------ evaluation
     def sync(self, x: PETSc.Vec) -> None:
         """Make u hold x (SNES evaluates at work vectors during line searches; the forms read u)."""
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -115,14 +167,14 @@ class DisplacementProblem:
     def begin_level(self, t: float) -> float:
         """Assemble b_n; return the force scale of the convergence tests: max(||b_n||, ||j(u_{n-1})||)."""
         self.ops.assemble_rhs(t)
-        if not self.carried and self.contact is not None:
+        if not self._carried and self.contact is not None:
             # no carried residual (first level, or after a failure): ||j(u_{n-1})|| from a full evaluation
             self.evaluate(self.u.vector, self.r)
         return max(self.ops.b.norm(), self.contact_norm)
 
     def first_residual(self, F: PETSc.Vec) -> None:
-        """F(u_{n-1}) for this level's b_n: derived from the carried residual when there is one."""
-        if self.carried and self.Fm is None:
+        """F(u_{n-1}) for this level's b_n: with the split and a carried level, F_last + b_{n-1} - b_n."""
+        if self._carried and self.split is not None:
             self.F_last.copy(F)
             F.axpy(1.0, self.ops.b_prev)
             F.axpy(-1.0, self.ops.b)
@@ -131,7 +183,7 @@ class DisplacementProblem:
             self.evaluate(self.u.vector, F)
 
     def evaluate(self, x: PETSc.Vec, F: PETSc.Vec) -> None:
-        """F = F(x), with the clamped rows x - 0 (so a Newton step keeps them at zero)."""
+        """F = F(x) = K x + j(x) + F_m(x) - b_n, with the clamped rows x - g_n (so a Newton step keeps them)."""
         self.sync(x)
         with F.localForm() as f:
             f.set(0.0)
@@ -158,7 +210,7 @@ class DisplacementProblem:
 
     def update_jacobian(self, x: PETSc.Vec) -> bool:
         """Bring J to the Jacobian at x; True if J was modified (a direct solver then refactors)."""
-        if self.Fm is not None:  # J = K (+ C) + dF_m/du, rebuilt at every call (it depends on zeta_n)
+        if self.split is None:  # J = K (+ C) + dF_m/du, rebuilt at every call (it depends on zeta_n)
             self.sync(x)
             self.ops.K.copy(self.J, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             if self.contact is not None:

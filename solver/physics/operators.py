@@ -1,4 +1,5 @@
-"""The fixed operators of the displacement problem (docs/model.md §3.3), assembled once.
+"""The fixed operators of the displacement problem (docs/model.md §3.3), assembled once; the level's
+forms as a whole are declared in :mod:`level`.
 
     K u = (A eps(u), eps(w))                    bulk stiffness, with the Dirichlet rows as identity
     b_n = (f0_n, w) + (f2_n, w)_{Gamma_N} - B M_n - K_{.D} g_n     loads at t_n, memory, lifting
@@ -171,8 +172,11 @@ class Operators:
         self.f0 = fem.Constant(mesh, np.zeros(d, dtype=PETSc.ScalarType))
         if self.body_force is not None:
             load = load + ufl.inner(self.f0, self.w) * ufl.dx
+        self.load_ufl = load  # l_n(w) = (f0_n, w) + (f2_n, w)_{Gamma_N}, its constants set by assemble_rhs
         self.load_form = fem.form(load)
         self.history = history
+        # (M_n, eps(w)) over the memory's points: the definition of B M_n, which MemoryForce forms without assembly
+        self.memory_ufl = (ufl.inner(history.M, strain(self.w)) * history.rule.dx) if history is not None else None
         # B M = (M, eps(w)) from the source's strain operator (tested equal to the assembled coupling)
         self._memory_force = MemoryForce(history.rule, history.H) if history is not None else None
 

@@ -1,5 +1,7 @@
-"""The displacement problem's Jacobian in the stiffness matrix's own storage (issue 30, memory): J = K + C(active
-set) is formed in K's matrix, K's rows under the contact Jacobian kept apart, and F(u) still uses K exactly."""
+"""The displacement problem's fast paths: the Jacobian in the stiffness matrix's own storage (J = K + C(active set)
+formed in K's matrix, K's rows under the contact Jacobian kept apart, F(u) still using K exactly), the split it
+relies on, and the carried residual's contract. tests/physics/test_level.py checks F and J against the UFL
+reference."""
 
 from dolfinx.fem import petsc as fpetsc
 from petsc4py import PETSc
@@ -60,3 +62,45 @@ def test_jacobian_lives_in_the_stiffness_matrix_and_equals_k_plus_c(comm):
     scale = want.norm()
     want.axpy(-1.0, F)
     assert want.norm() <= 1e-14 * scale and scale > 0
+
+
+def test_the_implicit_memory_term_removes_the_split(comm):
+    """With the implicit trapezoid term F_m the problem offers no split: J is a copy of K, no StiffnessRows."""
+    model = build_model(from_dict({**SCENE, "memory": {"kernel": "constant", "rule": "trapezoid"},
+                                   "solver": {"method": "newton"}}), comm)
+    problem = model.mech.problem
+    assert problem.split is None and problem.kept is None and problem.implicit_memory is not None
+    assert problem.J.handle != problem.ops.K.handle and not problem.symmetric
+    plain = build_model(from_dict(SCENE), comm).mech.problem
+    assert plain.split is not None and plain.split.K.handle == plain.ops.K.handle
+    assert plain.split.b.handle == plain.ops.b.handle and plain.split.contact is plain.contact
+
+
+def test_the_carried_residual_is_the_problems_own_state(comm):
+    """level_converged / forget_level set what ``carried`` reads; resume restores it and ||j|| from a checkpoint;
+    without a carried level the first residual is a full evaluation, with one it is F_last + b_prev - b."""
+    model = build_model(from_dict(SCENE), comm)
+    problem = model.mech.problem
+    assert not problem.carried
+    problem.level_converged()
+    assert problem.carried
+    problem.forget_level()
+    assert not problem.carried
+    problem.resume(True, 2.5)
+    assert problem.carried and problem.contact_norm == 2.5
+    problem.F_last.set(1.0)  # a carried residual no evaluation could give: the first residual must come from it
+    problem.ops.assemble_rhs(0.0)
+    problem.ops.assemble_rhs(0.5)
+    F = problem.r.duplicate()
+    problem.first_residual(F)
+    want = problem.ops.b_prev.copy()
+    want.axpy(-1.0, problem.ops.b)
+    want.shift(1.0)
+    want.axpy(-1.0, F)
+    assert want.norm() == 0.0
+    problem.forget_level()
+    problem.first_residual(F)
+    evaluated = F.duplicate()
+    problem.evaluate(model.u.vector, evaluated)
+    evaluated.axpy(-1.0, F)
+    assert evaluated.norm() == 0.0 and F.norm() > 0.0

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 import ufl
 from conftest import solve
+from dolfinx import fem
+from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from solver.config import from_dict
 from solver.errors import RigidMotionError
@@ -165,20 +168,23 @@ def test_rotation_left_free_by_the_dirichlet_parts_is_named(comm):
 def test_memory_force_is_the_assembled_coupling(comm, extra):
     """B M through the strain operator (E^T W m) equals the assembled (M, eps(w)) to round-off, for a
     memory tensor that is not symmetric and differs on every point."""
-    from dolfinx import fem
-    from dolfinx.fem import petsc as fpetsc
-
     model = _model(comm, **extra)
     ops = model.mech.ops
     M = model.history.M
     M.x.array[:] = np.sin(np.arange(M.x.array.size) + 1000.0 * comm.rank)
     M.x.scatter_forward()
-    # the definition: (S, eps(w)) for S in M's space, assembled
+    # the definition: (S, eps(w)) for S in M's space, assembled, and the level's memory term (M, eps(w)) itself
     B = fpetsc.assemble_matrix(fem.form(ufl.inner(ufl.TrialFunction(M.function_space), ufl.sym(ufl.grad(ops.w)))
                                         * model.history.rule.dx))
     B.assemble()
-    want, got = ops.b.duplicate(), ops.b.duplicate()
+    want, got, declared = ops.b.duplicate(), ops.b.duplicate(), ops.b.duplicate()
     B.mult(M.vector, want)
+    with declared.localForm() as local:
+        local.set(0.0)
+    fpetsc.assemble_vector(declared, fem.form(ops.memory_ufl))
+    declared.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    declared.axpy(-1.0, want)
+    assert declared.norm() <= 1e-13 * want.norm()
     ops._memory_force(M, got)
     got.axpy(-1.0, want)
     assert got.norm() <= 1e-13 * want.norm() and want.norm() > 0
