@@ -12,14 +12,18 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import logging
+import shlex
 import signal
 import sys
+import time
 from pathlib import Path
 
 from mpi4py import MPI
 
 from solver import __version__
 from solver.config import load
+from solver.config.accuracy import tolerance
+from solver.config.fields import Ctx
 from solver.errors import InputError, Interrupted, SolveFailure, UsageError
 from solver.io import layout
 from solver.run import formcache
@@ -107,6 +111,7 @@ WARN_OUTPUT_BYTES = 2 * 1024**3  # check warns above this estimate of a run's ou
 def _output_estimate(cfg, geo) -> tuple[int, int]:
     """(levels written, bytes) a run of cfg writes: each written level holds every chosen field (cells or nodes
     times components at the output precision) and every level a CSV row of about 400 bytes."""
+    from solver.io.fields import KINDS
     from solver.run.stepper import writes_level
 
     d, steps = cfg.dim, cfg.time.steps
@@ -114,14 +119,13 @@ def _output_estimate(cfg, geo) -> tuple[int, int]:
     nodes = geo.mesh.topology.index_map(0).size_global
     cells = geo.mesh.topology.index_map(d).size_global
     comps = {"Vector": 3, "Scalar": 1, "Tensor6": 6}
-    from solver.io.fields import KINDS
-
     per_level = sum((nodes if KINDS[f][0] == "Node" else cells) * comps[KINDS[f][1]] for f in cfg.output.fields)
     width = 4 if cfg.output.precision == "single" else 8
     return levels, levels * per_level * width + 400 * (steps + 1)
 
 
-def cmd_check(args, comm: MPI.Comm) -> int:
+def cmd_check(args: argparse.Namespace, comm: MPI.Comm) -> int:
+    """``solver check``: validate the scene against its mesh and print what a run would compute and write."""
     from dolfinx import fem
 
     from solver.mesh.geometry import build
@@ -157,14 +161,11 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     return 0
 
 
-def _scene(args):
+def _scene(args: argparse.Namespace):
     """The scene with its ``--set`` overrides, and ``--tolerance`` as accuracy.tolerance (checked like the scene
     key, before the scene is read)."""
     if args.tolerance is None:
         return load(args.config, args.overrides)
-    from solver.config.accuracy import tolerance
-    from solver.config.fields import Ctx
-
     try:
         value = float(args.tolerance)
     except ValueError:
@@ -173,9 +174,8 @@ def _scene(args):
     return load(args.config, args.overrides).replace({"accuracy": {"tolerance": value}}, label="--tolerance")
 
 
-def cmd_run(args, comm: MPI.Comm) -> int:
-    import time
-
+def cmd_run(args: argparse.Namespace, comm: MPI.Comm) -> int:
+    """``solver run``: launch the scene in its results directory, run it with a progress display, report."""
     cfg = _scene(args)
     if args.output is not None and not args.output.strip():
         raise UsageError(f"--output {args.output!r}: empty; give a directory (or leave --output out to use the "
@@ -198,8 +198,6 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     except Interrupted as exc:
         if bar is not None:
             bar.close()
-        import shlex
-
         how = shlex.join(["python", "-m", "solver", "run", args.config, "--output", str(outdir),
                           *(a for o in args.overrides for a in ("--set", o)), "--restart"])
         log.info("stopped by %s at the end of step %d (t = %g): results and a checkpoint up to there in %s; "
