@@ -9,13 +9,13 @@ The same scenes, checks and results as ``python -m solver run``, without strings
     res.fields["damage"]                      # the final level's fields at the mesh nodes (input order)
 
 A change that a scene file would refuse raises the same one-line :class:`solver.errors.ConfigError`.
+``api.run(cfg, tolerance=1e-2)`` plans mesh, degree and step as ``solver run --tolerance`` does.
 Every rank of a communicator calls :func:`run` with the same scene; every rank gets the same
 series and the same (gathered) fields.
 """
 
 from __future__ import annotations
 
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,13 +23,9 @@ from typing import Any
 import numpy as np
 
 from solver.config import Config, from_dict, load
-from solver.errors import UsageError
+from solver.io.layout import API, ResultsDir, timeseries_columns
 
 __all__ = ["Config", "Results", "load", "read", "run", "scene"]
-
-# what a results directory holds (cli.RESULT_FILES): replaced by run(..., overwrite=True)
-_RESULT_FILES = ("solution.xdmf", "fields", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
-                 "mesh.h5")
 
 
 @dataclass
@@ -41,6 +37,8 @@ class Results:
     ``damage`` as (nodes,)) at ``points`` in the mesh's input order, the same on every rank.
     ``directory``: where the files went (None: in memory). ``model``: the live dolfinx objects of an in-memory
     run (``model.u``, ``model.zeta``), for post-processing with dolfinx/UFL; None when read from files.
+    ``plan``: what a tolerance chose (:class:`solver.run.accuracy.Plan`: ``degree``, ``order``, ``k``,
+    ``summary()`` as in plan.json); None without a tolerance or when read from files.
     """
 
     series: dict[str, np.ndarray]
@@ -48,6 +46,7 @@ class Results:
     points: np.ndarray
     directory: Path | None = None
     model: Any = field(default=None, repr=False)
+    plan: Any = field(default=None, repr=False)
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -69,37 +68,29 @@ def scene(data: dict | None = None, source: str = "<python>", base: str | Path |
 
 
 def run(cfg: Config, output: str | Path | None = None, overwrite: bool = False, comm: Any = None,
-        on_step: Any = None) -> Results:
+        on_step: Any = None, tolerance: float | None = None) -> Results:
     """Run ``cfg``; with ``output``, write the results directory as ``solver run --output`` does.
 
-    ``overwrite``: replace earlier results in ``output`` (else a UsageError, as the CLI refuses).
-    ``on_step(row)``: called after each level (a progress bar). ``comm``: default MPI.COMM_WORLD.
-    A scene with ``accuracy.tolerance`` is refused: the planner runs from the CLI (``--tolerance``).
+    ``overwrite``: replace earlier results in ``output`` (else a
+    :class:`solver.io.layout.OutputDirectoryError`, a UsageError, as the CLI refuses).
+    ``tolerance``: as ``solver run --tolerance`` (``accuracy.tolerance``, also taken from the scene): the solver
+    chooses mesh, degree and step first (the same plan and results as the CLI; plan.json and mesh.xdmf with
+    ``output``). ``on_step(row)``: called after each level (a progress bar). ``comm``: default MPI.COMM_WORLD.
     """
     from mpi4py import MPI
 
+    from solver.io.launch import launch
     from solver.io.results import run as run_model
-    from solver.run.model import build_model
 
     comm = MPI.COMM_WORLD if comm is None else comm
-    if cfg.accuracy.enabled:
-        raise UsageError("api.run: accuracy.tolerance is set; run tolerance scenes with `solver run --tolerance` "
-                         "(the Python interface runs a scene as given)")
+    if tolerance is not None:
+        cfg = cfg.replace({"accuracy": {"tolerance": tolerance}}, label="tolerance")
     outdir = None if output is None else Path(output)
-    model = build_model(cfg, comm)
-    if outdir is not None:
-        _prepare(comm, outdir, overwrite)
-    rows = run_model(model, outdir, on_step=on_step)
-    series = {c: np.array([r[c] for r in rows], dtype=float) for c in _columns(model)}
-    points, fields = final_fields(model)
-    return Results(series, fields, points, outdir, model)
-
-
-def _columns(model: Any) -> tuple[str, ...]:
-    """The columns timeseries.csv has for this model, in its order (solver.io.results.run)."""
-    from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS
-
-    return CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
+    start = launch(cfg, comm, outdir, overwrite, wording=API)
+    rows = run_model(start.model, outdir, on_step=on_step, sensors=start.sensors)
+    series = {c: np.array([r[c] for r in rows], dtype=float) for c in timeseries_columns(start.model, start.sensors)}
+    points, fields = final_fields(start.model)
+    return Results(series, fields, points, outdir, start.model, start.plan)
 
 
 def read(directory: str | Path) -> Results:
@@ -108,7 +99,7 @@ def read(directory: str | Path) -> Results:
     from solver.post.results import read_results as read_dir
 
     directory = Path(directory)
-    rows = read_csv(directory / "timeseries.csv")
+    rows = read_csv(ResultsDir(directory).timeseries)
     series = {c: np.array([r[c] for r in rows]) for c in rows[0]} if rows else {}
     res = read_dir(directory)
     last = res["times"][-1]
@@ -151,25 +142,3 @@ def _p1(f: Any) -> Any:
     out = fem.Function(V1)
     out.interpolate(f)
     return out
-
-
-def _prepare(comm: Any, outdir: Path, overwrite: bool) -> None:
-    """Make ``outdir`` (rank 0); refuse earlier results unless ``overwrite`` (UsageError on every rank)."""
-    problem = None
-    if comm.rank == 0:
-        existing = [f for f in _RESULT_FILES if (outdir / f).exists()]
-        if outdir.exists() and not outdir.is_dir():
-            problem = f"output {outdir}: exists and is not a directory"
-        elif existing and not overwrite:
-            problem = f"output {outdir}: holds earlier results ({', '.join(existing)}); pass overwrite=True to replace them"
-        else:
-            for f in existing:
-                target = outdir / f
-                shutil.rmtree(target) if target.is_dir() else target.unlink()
-            try:
-                outdir.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                problem = f"output {outdir}: cannot write there ({exc.strerror or exc})"
-    problem = comm.bcast(problem, root=0)
-    if problem:
-        raise UsageError(problem)

@@ -12,15 +12,20 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import logging
+import shlex
 import signal
 import sys
+import time
 from pathlib import Path
 
 from mpi4py import MPI
 
 from solver import __version__
 from solver.config import load
+from solver.config.accuracy import tolerance
+from solver.config.fields import Ctx
 from solver.errors import InputError, Interrupted, SolveFailure, UsageError
+from solver.io import layout
 from solver.run import formcache
 
 log = logging.getLogger("solver")
@@ -56,8 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     mode = r.add_mutually_exclusive_group()
     mode.add_argument("--overwrite", action="store_true",
                       help="replace earlier results in the output directory: removes only the files a run writes "
-                           "(" + ", ".join(RESULT_FILES) + ", fields/mesh.h5, fields/levels_*.h5); anything else "
-                           "there is kept")
+                           f"({layout.listing()}); anything else there is kept")
     mode.add_argument("--restart", action="store_true",
                       help="continue the run in the output directory from its last checkpoint")
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -70,107 +74,6 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("config")
     c.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
     return p
-
-
-RESULT_FILES = ("solution.xdmf", "timeseries.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
-                "mesh.h5")
-FIELD_FILES = ("mesh.h5", "levels_*.h5")  # what the series writes in fields/ (solver/io/xdmf.py)
-
-
-def _written(outdir: Path) -> list[Path]:
-    """The files of outdir that a run writes (and --overwrite removes): nothing else there is touched."""
-    found = [outdir / f for f in RESULT_FILES if (outdir / f).is_file()]
-    fields = outdir / "fields"
-    if fields.is_dir():
-        found += sorted(p for pattern in FIELD_FILES for p in fields.glob(pattern) if p.is_file())
-    return found
-
-
-def _prepare_output(comm: MPI.Comm, outdir: Path, overwrite: bool, restart: bool, dry: bool = False) -> None:
-    """Check the results directory and make it (rank 0): refusals and an unwritable directory raise UsageError.
-    ``dry``: only the refusals, nothing made or removed (before a long planning that may refuse the tolerance)."""
-    import tempfile
-
-    problem = None
-    if comm.rank == 0:
-        try:
-            if outdir.exists() and not outdir.is_dir():
-                problem = f"--output {outdir}: exists and is not a directory"
-            elif restart:
-                if not (outdir / "checkpoint.h5").exists():
-                    problem = f"--restart: {outdir / 'checkpoint.h5'} does not exist (nothing to restart from)"
-            elif outdir.is_dir():
-                existing = _written(outdir)
-                if existing and not overwrite:
-                    names = sorted({str(p.relative_to(outdir).parent / "") if p.parent.name == "fields" else p.name
-                                    for p in existing})
-                    problem = (f"--output {outdir}: holds earlier results ({', '.join(names)}); "
-                               "pass --overwrite to replace them, --restart to continue them, or choose another directory")
-                elif existing and not dry:
-                    for target in existing:
-                        target.unlink()
-                    if (outdir / "fields").is_dir() and not any((outdir / "fields").iterdir()):
-                        (outdir / "fields").rmdir()
-            if problem is None and not dry:
-                outdir.mkdir(parents=True, exist_ok=True)
-                tempfile.TemporaryFile(dir=outdir).close()  # can we write in it? (mode bits do not tell root)
-        except OSError as exc:
-            problem = f"--output {outdir}: cannot write there ({exc.strerror or exc})"
-    problem = comm.bcast(problem, root=0)
-    if problem:
-        raise UsageError(problem)
-
-
-def _same_scene(comm: MPI.Comm, cfg, outdir: Path) -> None:
-    """Refuse a restart whose scene differs from the checkpoint's, naming the first key that differs."""
-    problem = None
-    if comm.rank == 0:
-        import h5py
-
-        from solver.io.checkpoint import NAME, scene_hash
-
-        path = outdir / NAME
-        try:
-            with h5py.File(path, "r") as h5:
-                stored = h5.attrs["scene"]
-        except (OSError, KeyError):
-            stored = None  # missing or unreadable: _prepare_output and checkpoint.read say so
-        if stored is not None and stored != scene_hash(cfg):
-            problem = f"--restart: the scene differs from the one that wrote {path}"
-            key = _first_difference(cfg, outdir / "config.toml")
-            problem += (f" at {key}" if key else "") + " (only [output] may change)"
-    problem = comm.bcast(problem, root=0)
-    if problem:
-        raise UsageError(problem)
-
-
-def _first_difference(cfg, written: Path) -> str | None:
-    """The first key (dotted, [output] left out) where cfg differs from the resolved scene in ``written``, with both
-    values; None if that file is missing or unreadable."""
-    import tomllib
-
-    from solver.config import to_dict
-    from solver.errors import show
-
-    try:
-        old = tomllib.loads(written.read_text())
-    except (OSError, ValueError):
-        return None
-
-    def walk(a, b, prefix: str) -> str | None:
-        if isinstance(a, dict) and isinstance(b, dict):
-            for key in list(a) + [k for k in b if k not in a]:
-                if prefix + key == "output":
-                    continue
-                found = walk(a.get(key), b.get(key), f"{prefix}{key}.")
-                if found:
-                    return found
-            return None
-        if a != b:
-            return f"{prefix.rstrip('.')} = {show(a)} (the checkpoint's run had {show(b)})"
-        return None
-
-    return walk(to_dict(cfg), old, "")
 
 
 def _progress(comm: MPI.Comm, steps: int, enabled: bool):
@@ -208,6 +111,7 @@ WARN_OUTPUT_BYTES = 2 * 1024**3  # check warns above this estimate of a run's ou
 def _output_estimate(cfg, geo) -> tuple[int, int]:
     """(levels written, bytes) a run of cfg writes: each written level holds every chosen field (cells or nodes
     times components at the output precision) and every level a CSV row of about 400 bytes."""
+    from solver.io.fields import KINDS
     from solver.run.stepper import writes_level
 
     d, steps = cfg.dim, cfg.time.steps
@@ -215,14 +119,13 @@ def _output_estimate(cfg, geo) -> tuple[int, int]:
     nodes = geo.mesh.topology.index_map(0).size_global
     cells = geo.mesh.topology.index_map(d).size_global
     comps = {"Vector": 3, "Scalar": 1, "Tensor6": 6}
-    from solver.io.fields import KINDS
-
     per_level = sum((nodes if KINDS[f][0] == "Node" else cells) * comps[KINDS[f][1]] for f in cfg.output.fields)
     width = 4 if cfg.output.precision == "single" else 8
     return levels, levels * per_level * width + 400 * (steps + 1)
 
 
-def cmd_check(args, comm: MPI.Comm) -> int:
+def cmd_check(args: argparse.Namespace, comm: MPI.Comm) -> int:
+    """``solver check``: validate the scene against its mesh and print what a run would compute and write."""
     from dolfinx import fem
 
     from solver.mesh.geometry import build
@@ -258,14 +161,11 @@ def cmd_check(args, comm: MPI.Comm) -> int:
     return 0
 
 
-def _scene(args):
+def _scene(args: argparse.Namespace):
     """The scene with its ``--set`` overrides, and ``--tolerance`` as accuracy.tolerance (checked like the scene
     key, before the scene is read)."""
     if args.tolerance is None:
         return load(args.config, args.overrides)
-    from solver.config.accuracy import tolerance
-    from solver.config.fields import Ctx
-
     try:
         value = float(args.tolerance)
     except ValueError:
@@ -274,28 +174,21 @@ def _scene(args):
     return load(args.config, args.overrides).replace({"accuracy": {"tolerance": value}}, label="--tolerance")
 
 
-def cmd_run(args, comm: MPI.Comm) -> int:
-    import time
-
+def cmd_run(args: argparse.Namespace, comm: MPI.Comm) -> int:
+    """``solver run``: launch the scene in its results directory, run it with a progress display, report."""
     cfg = _scene(args)
     if args.output is not None and not args.output.strip():
         raise UsageError(f"--output {args.output!r}: empty; give a directory (or leave --output out to use the "
                          f"scene's output.directory = {cfg.output.directory!r})")
     outdir = Path(cfg.output.directory if args.output is None else args.output)
-    if args.restart and not cfg.accuracy.enabled:  # (a tolerance's scene is known after planning: checked then)
-        _same_scene(comm, cfg, outdir)  # before anything is printed or built
-    # geometry problems (missing physical groups, incompatible intervals) are found before any file is made
+    from solver.io.launch import launch
     from solver.io.results import run
-    from solver.run.model import build_model
 
     formcache.install()  # compiled forms opened by file name, not found by listing FFCx's cache (start-up)
     start = time.perf_counter()
-    if cfg.accuracy.enabled:
-        cfg, model, plan, sensors = _planned(args, comm, cfg, outdir)
-    else:
-        plan, sensors = None, ()
-        model = build_model(cfg, comm)
-        _prepare_output(comm, outdir, args.overwrite, args.restart)
+    # a restart's scene, then the model (geometry problems), then the directory: refusals before any file is made
+    launched = launch(cfg, comm, outdir, args.overwrite, args.restart, args.overrides)
+    cfg, model, plan, sensors = launched.config, launched.model, launched.plan, launched.sensors
     log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
              comm.size)
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
@@ -305,8 +198,6 @@ def cmd_run(args, comm: MPI.Comm) -> int:
     except Interrupted as exc:
         if bar is not None:
             bar.close()
-        import shlex
-
         how = shlex.join(["python", "-m", "solver", "run", args.config, "--output", str(outdir),
                           *(a for o in args.overrides for a in ("--set", o)), "--restart"])
         log.info("stopped by %s at the end of step %d (t = %g): results and a checkpoint up to there in %s; "
@@ -318,31 +209,6 @@ def cmd_run(args, comm: MPI.Comm) -> int:
             bar.close()
     _report(rows, time.perf_counter() - start, plan, sensors, model, outdir)
     return 0
-
-
-def _planned(args, comm: MPI.Comm, cfg, outdir: Path):
-    """``--tolerance``: plan the scene (nothing is made before the plan is accepted), then build its model and the
-    error sensor, and write plan.json and mesh.xdmf. Returns (the planned scene, model, plan, sensors)."""
-    from solver.run.accuracy import ErrorSensor, contradicting
-    from solver.run.accuracy import plan as make_plan
-    from solver.run.model import build_model
-
-    clash = contradicting(args.overrides)
-    if clash:
-        raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "
-                         "the mesh size, the step, the degree and the order); drop one of them")
-    _prepare_output(comm, outdir, args.overwrite, args.restart, dry=True)
-    log.info("tolerance %g: choosing degree, mesh and step", cfg.accuracy.tolerance)
-    formcache.install()  # the planner builds a dozen models: keep their compiled forms in memory
-    plan = make_plan(cfg, comm, log=log.info)
-    _prepare_output(comm, outdir, args.overwrite, args.restart)  # only now: a refused tolerance makes nothing
-    cfg = plan.config
-    if args.restart:
-        _same_scene(comm, cfg, outdir)
-    model = build_model(cfg, comm, plan.geo)
-    sensors = (ErrorSensor(model, plan),)
-    _write_plan(comm, outdir, plan, model)
-    return cfg, model, plan, sensors
 
 
 def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdir: Path) -> None:
@@ -358,7 +224,7 @@ def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdi
         if worst["total"] > plan.tolerance:
             log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
                      "mesh was too small); run again with a smaller tolerance")
-    log.info("results in %s (solution.xdmf for ParaView, timeseries.csv, config.toml)", outdir)
+    log.info("results in %s (%s for ParaView, %s, %s)", outdir, layout.SOLUTION, layout.TIMESERIES, layout.CONFIG)
 
 
 class _StopOnSignal:
@@ -384,23 +250,6 @@ class _StopOnSignal:
     def restore(self) -> None:
         for s, handler in self.previous.items():
             signal.signal(s, handler)
-
-
-def _write_plan(comm: MPI.Comm, outdir: Path, plan, model) -> None:
-    """plan.json (what the tolerance chose and why) and the chosen mesh with its boundary tags (mesh.xdmf)."""
-    import json
-
-    from dolfinx.io import XDMFFile
-
-    from solver.io.files import on_rank0, write_text_atomic
-
-    info = plan.summary()
-    info["parts"] = model.geo.tags
-    on_rank0(comm, lambda: write_text_atomic(outdir / "plan.json", json.dumps(info, indent=1) + "\n"))
-    with XDMFFile(comm, str(outdir / "mesh.xdmf"), "w") as f:
-        f.write_mesh(model.geo.mesh)
-        model.geo.mesh.topology.create_connectivity(model.geo.dim - 1, model.geo.dim)
-        f.write_meshtags(model.geo.facet_tags)
 
 
 def _installed(module: str) -> bool:

@@ -1,11 +1,14 @@
 """The Python interface (solver/api.py): the same results as the CLI, the same one-line errors, no strings."""
 
+import json
+
 import numpy as np
 import pytest
 from conftest import ROOT, run_cli
 
 from solver import api
 from solver.errors import ConfigError, UsageError
+from solver.io.layout import OutputDirectoryError
 from solver.post.results import read_csv, read_results
 
 EXAMPLE1 = ROOT / "configs" / "example1.toml"
@@ -93,5 +96,61 @@ def test_errors_are_the_scene_files(comm, shared_tmp):
     with pytest.raises(UsageError, match="overwrite=True"):
         api.run(cfg, shared_tmp / "once")
     api.run(cfg, shared_tmp / "once", overwrite=True)
-    with pytest.raises(UsageError, match="tolerance"):
-        api.run(cfg.replace({"accuracy": {"tolerance": 1e-2}}))
+    with pytest.raises(ConfigError) as exc:
+        api.run(cfg, tolerance=2.0)
+    assert exc.value.key == "accuracy.tolerance"
+
+
+def test_earlier_results_are_a_typed_refusal_and_overwrite_leaves_no_stale_profile(comm, shared_tmp):
+    """overwrite=True removes every file a run writes: a scene without contact leaves no contact.csv of the one
+    before (which `solver plot` would draw)."""
+    out = shared_tmp / "r"
+    api.run(api.scene(SMALL), out)
+    comm.barrier()
+    assert (out / "contact.csv").is_file()
+    free = api.scene({**SMALL, "boundary": {**SMALL["boundary"], "bottom": {"role": "traction", "traction": [0.0, 0.0]}}})
+    with pytest.raises(OutputDirectoryError) as exc:
+        api.run(free, out)
+    assert exc.value.problem == "earlier results" and "contact.csv" in exc.value.existing
+    assert isinstance(exc.value, UsageError)
+    api.run(free, out, overwrite=True)
+    comm.barrier()
+    assert (out / "timeseries.csv").is_file() and not (out / "contact.csv").exists()
+
+
+def _close(a, b) -> bool:
+    """The same JSON document, numbers to 1e-12 relative."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) or isinstance(b, float):
+        return a == pytest.approx(b, rel=1e-12, abs=0)
+    return a == b
+
+
+TOLERANCE = ["--tolerance", "1e-2", "--set", "time.T=0.2"]
+
+
+@pytest.mark.serial
+def test_tolerance_runs_as_the_cli_does(tmp_path):
+    """api.run(cfg, dir, tolerance=...) makes the plan `solver run --tolerance` makes and the same results: plan.json,
+    the chosen mesh, every CSV column (the error estimates too) and the fields."""
+    cli = tmp_path / "cli"
+    res = run_cli(["run", str(EXAMPLE1), *TOLERANCE, "--no-progress", "--output", str(cli)])
+    assert res.returncode == 0, res.stderr
+    out = api.run(api.load(EXAMPLE1).replace({"time": {"T": 0.2}}), tmp_path / "api", tolerance=1e-2)
+    want, got = (json.loads((d / "plan.json").read_text()) for d in (cli, tmp_path / "api"))
+    want.pop("planning_seconds"), got.pop("planning_seconds")
+    assert _close(got, want), (got, want)
+    assert out.plan.degree == want["u_degree"] and out.plan.k == want["k"]
+    assert (tmp_path / "api" / "mesh.xdmf").read_text() == (cli / "mesh.xdmf").read_text()
+    a, b = read_csv(cli / "timeseries.csv"), read_csv(tmp_path / "api" / "timeseries.csv")
+    assert list(a[0]) == list(b[0]) == list(out.columns) and "est_space" in out.columns
+    for c in _csv_columns(a):
+        assert _rel([r[c] for r in a], [r[c] for r in b]) <= 1e-12, c
+        assert _rel([r[c] for r in a], out.series[c]) <= 1e-12, c
+    fa, fb = read_results(cli)["fields"], read_results(tmp_path / "api")["fields"]
+    for name in fa:
+        for t in fa[name]:
+            assert _rel(fa[name][t], fb[name][t]) <= 1e-12, (name, t)

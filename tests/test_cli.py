@@ -166,3 +166,26 @@ def test_output_directory_that_cannot_be_written(tmp_path):
         assert res.stderr.strip() == f"error: --output {ro / 'o'}: cannot write there ({reason})", res.stderr
     finally:
         subprocess.run(["umount", str(ro)], capture_output=True) if os.geteuid() == 0 else ro.chmod(0o755)
+
+
+NO_CONTACT = ["--set", 'boundary.bottom={role="traction", traction=[0.0, 0.0]}']
+
+
+def test_overwrite_by_a_scene_without_contact_leaves_no_contact_profile(tmp_path):
+    """--overwrite removes every file a run writes: a contact.csv left behind would be plotted as the new run's."""
+    out = tmp_path / "o"
+    assert cli(["run", "configs/example1.toml", "--output", str(out), *SMALL]).returncode == 0
+    assert (out / "contact.csv").is_file()
+    res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL, *NO_CONTACT])
+    assert res.returncode == 2 and "contact.csv" in res.stderr  # named among the earlier results
+    res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL, *NO_CONTACT, "--overwrite"])
+    assert res.returncode == 0, res.stderr
+    assert (out / "timeseries.csv").is_file() and not (out / "contact.csv").exists()
+
+
+def test_run_help_lists_the_files_of_the_layout():
+    from solver.io import layout
+
+    res = cli(["run", "--help"])
+    assert res.returncode == 0 and layout.listing() in " ".join(res.stdout.split())
+    assert all(name in layout.listing() for name in layout.TOP_FILES)

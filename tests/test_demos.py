@@ -2,7 +2,6 @@
 minute, and write their charts (as the dolfinx demos do in CI)."""
 
 import importlib.util
-import os
 import subprocess
 import sys
 
@@ -30,9 +29,30 @@ def test_demo_runs(demo, tmp_path):
     assert "Traceback" not in res.stderr
 
 
-def test_demos_are_jupytext_percent_scripts():
-    """Each opens as a notebook: the jupytext header and markdown cells beside the code."""
-    for demo in DEMOS:
-        text = demo.read_text()
-        assert "format_name: percent" in text and "# %% [markdown]" in text, demo.name
-        assert os.access(demo, os.R_OK)
+def _cells(text: str) -> tuple[list[str], list[tuple[str, list[str]]]]:
+    """(the header's lines, [(kind, lines)] of the cells) of a jupytext percent script: the header is the comment
+    block between the first two ``# ---`` lines at the top, a cell starts at a ``# %%`` line."""
+    lines = text.splitlines()
+    end = lines.index("# ---", 1) if lines[:1] == ["# ---"] and "# ---" in lines[1:] else 0
+    cells: list[tuple[str, list[str]]] = []
+    for line in lines[end + 1:]:
+        if line.startswith("# %%"):
+            cells.append(("markdown" if line.strip() == "# %% [markdown]" else "code", []))
+        elif cells:
+            cells[-1][1].append(line)
+        elif line.strip():
+            cells.append(("before the first cell", [line]))
+    return lines[1:end], cells
+
+
+@pytest.mark.parametrize("demo", DEMOS, ids=lambda p: p.stem)
+def test_demos_are_jupytext_percent_scripts(demo):
+    """Each opens as a notebook: the jupytext header at the top, then only cells, markdown ones (every line a
+    comment: the text a notebook shows) beside code ones."""
+    header, cells = _cells(demo.read_text())
+    assert "#       format_name: percent" in header and "# jupyter:" in header, header
+    kinds = [kind for kind, _ in cells]
+    assert "markdown" in kinds and "code" in kinds and set(kinds) == {"markdown", "code"}, kinds
+    for kind, lines in cells:
+        if kind == "markdown":
+            assert all(not ln.strip() or ln.startswith("#") for ln in lines), lines

@@ -13,9 +13,8 @@ from pathlib import Path
 from mpi4py import MPI
 
 from solver.io.files import on_rank0, write_text_atomic
+from solver.io.layout import PROFILE_COLUMNS
 from solver.physics.contact_traces import ContactTraces
-
-PROFILE_COLUMNS = ("step", "t", "part", "s", "x", "y", "z", "gap", "u_normal", "penetration", "pressure")
 
 
 class ProfileWriter:

@@ -1,10 +1,11 @@
 """A run written to a results directory: the fields, the CSV time series, checkpoints and restart.
 
-:func:`run` drives :func:`solver.run.stepper.levels` and writes what it yields:
-``solution.xdmf`` + ``fields/`` (sigma_n = A eps(u_n) + M_n and the rest, :mod:`solver.io.fields`),
-``timeseries.csv`` (one row a level), ``contact.csv`` (the contact results along Γ_C at each written
-level, :mod:`solver.io.contact_profile`; scenes with contact), ``config.toml`` (the resolved scene) and
-``checkpoint.h5`` every ``output.checkpoint_every`` levels.
+:func:`run` drives :func:`solver.run.stepper.levels` and writes what it yields into the files
+:mod:`solver.io.layout` names: ``solution.xdmf`` + ``fields/`` (sigma_n = A eps(u_n) + M_n and the rest,
+:mod:`solver.io.fields`), ``timeseries.csv`` (one row a level), ``contact.csv`` (the contact results along Γ_C at
+each written level, :mod:`solver.io.contact_profile`; scenes with contact), ``config.toml`` (the resolved scene)
+and ``checkpoint.h5`` every ``output.checkpoint_every`` levels. The directory is prepared before
+(:func:`solver.io.layout.prepare`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from solver.io import checkpoint
 from solver.io.contact_profile import ProfileWriter
 from solver.io.fields import Outputs
 from solver.io.files import on_rank0, write_text_atomic
-from solver.io.timeseries import CSV_COLUMNS, KRYLOV_COLUMNS, CSVWriter
+from solver.io.layout import ResultsDir, timeseries_columns
+from solver.io.timeseries import CSVWriter
 from solver.run.model import Model
 from solver.run.stepper import levels, writes_level
 
@@ -48,7 +50,7 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
         ckpt = checkpoint.read(outdir, model)
         start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
         if comm.rank == 0:
-            keep = _csv_lines_until(outdir / "timeseries.csv", ckpt.step)
+            keep = _csv_lines_until(ResultsDir(outdir).timeseries, ckpt.step)
     writers = _Writers(model, outdir, sensors, keep, keep_until, start - 1 if restart else None)
     rows: list[dict] = []
     finished, interrupted = False, None
@@ -90,15 +92,15 @@ class _Writers:
                  keep_until: float | None, profile_until: int | None) -> None:
         cfg, comm = model.cfg, model.comm
         self.comm, self.steps, self.every = comm, cfg.time.steps, cfg.output.every
-        if outdir is not None:
-            on_rank0(comm, lambda: write_text_atomic(outdir / "config.toml", dumps(cfg)))
+        files = ResultsDir(outdir) if outdir is not None else None
+        if files is not None:
+            on_rank0(comm, lambda: write_text_atomic(files.config, dumps(cfg)))
         self.out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
-        columns = (CSV_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ()) + model.mech.diagnostics.columns
-                   + tuple(c for s in sensors for c in s.columns))
-        self.csv = CSVWriter(outdir / "timeseries.csv", comm, keep=keep, columns=columns) if outdir is not None else None
+        columns = timeseries_columns(model, sensors)
+        self.csv = CSVWriter(files.timeseries, comm, keep=keep, columns=columns) if files is not None else None
         traces = model.mech.diagnostics.traces
-        self.profile = (ProfileWriter(outdir / "contact.csv", comm, traces, profile_until)
-                        if outdir is not None and traces is not None else None)
+        self.profile = (ProfileWriter(files.contact, comm, traces, profile_until)
+                        if files is not None and traces is not None else None)
         self.every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
         self.traces = traces if outdir is not None else None
 

@@ -1,4 +1,5 @@
-"""The CSV time series of a run (``timeseries.csv``): its columns and its writer (rank 0)."""
+"""The CSV time series of a run (``timeseries.csv``): its writer (rank 0); its columns are
+:func:`solver.io.layout.timeseries_columns`."""
 
 from __future__ import annotations
 
@@ -8,23 +9,15 @@ from pathlib import Path
 from mpi4py import MPI
 
 from solver.io.files import on_rank0, write_text_atomic
+from solver.io.layout import KRYLOV_COLUMNS  # noqa: F401  (importers read the columns here too)
+from solver.io.layout import TIMESERIES_COLUMNS as CSV_COLUMNS
 from solver.run.stepper import TIMING_COLUMNS  # noqa: F401  (part of the columns' description)
-
-CSV_COLUMNS = (
-    "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
-    "contact_length", "max_penetration", "zeta_min", "zeta_max", "zeta_raw_min", "zeta_raw_max", "zeta_clipped",
-    "strain_norm", "zeta_norm", "time_damage", "time_memory", "time_displacement", "time_diagnostics", "time_output",
-    "wall_time",
-)
-# with solver.linear resolving to "iterative": the Krylov iterations of the level's displacement solves (summed
-# over its Newton iterations) and of its damage solve; they follow CSV_COLUMNS, before the reaction columns
-KRYLOV_COLUMNS = ("krylov_iterations", "damage_krylov_iterations")
 
 
 class CSVWriter:
     """Rows of the time series, written by rank 0, each row one ``write()`` of a whole line.
 
-    ``columns``: CSV_COLUMNS and the scene's own (the reactions of its Dirichlet parts).
+    ``columns``: :func:`solver.io.layout.timeseries_columns` of the run (default: the fixed ones only).
 
     The file is opened in append mode and every row goes out in a single system call, so
     a killed run leaves only complete rows; a row that does not fit on the disk is cut off

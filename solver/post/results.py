@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import ResultsError
+from solver.io.layout import PROFILE_COLUMNS, ResultsDir
 from solver.io.xdmf import read_series
 
 
@@ -17,7 +18,7 @@ def read_results(directory: str | Path) -> dict:
     DG0 fields per cell; tensors as XX, YY, ZZ, XY, YZ, XZ). Rows are in the mesh's input order,
     the same whatever the number of ranks that wrote them (solver/io/xdmf.py). A damaged directory is a
     :class:`ResultsError` naming the file and what is wrong."""
-    path = Path(directory) / "solution.xdmf"
+    path = ResultsDir(Path(directory)).solution
     res = read_series(path)
     out = {"geometry": res["points"], "topology": res["cells"], "times": res["times"], "fields": {}}
     for name, values in res["fields"].items():
@@ -62,14 +63,15 @@ def _number(path: str | Path, line: int, key: str, value: str) -> float:
         raise ResultsError(path, f"line {line}: {key} = {value[:40]!r} is not a number") from None
 
 
-PROFILE_COLUMNS = ("step", "part", "t", "s", "pressure", "gap", "u_normal", "penetration")
+# what read_profile needs of contact.csv: every column but the point's coordinates
+PROFILE_NEEDED = tuple(c for c in PROFILE_COLUMNS if c not in ("x", "y", "z"))
 
 
 def read_profile(path: str | Path) -> dict[tuple[int, str], dict[str, np.ndarray]]:
     """Read a contact.csv back: {(step, part): {column: values along the part}} (solver/io/contact_profile.py);
     a damaged file is a :class:`ResultsError` as in :func:`read_csv`."""
     out: dict[tuple[int, str], dict[str, list[float]]] = {}
-    for n, row in _rows(path, PROFILE_COLUMNS):
+    for n, row in _rows(path, PROFILE_NEEDED):
         step = _number(path, n, "step", row["step"])
         if not (np.isfinite(step) and step == int(step)):
             raise ResultsError(path, f"line {n}: step = {row['step'][:40]!r} is not a whole number")

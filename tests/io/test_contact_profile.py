@@ -1,4 +1,4 @@
-"""The contact results (issue 29): the pressure λ_h, the gap and the penetration as fields in solution.xdmf and
+"""The contact results: the pressure λ_h, the gap and the penetration as fields in solution.xdmf and
 along Γ_C in contact.csv, and the peak pressure in timeseries.csv. λ_h carries exactly the contact force of the
 discrete equations: its integral over Γ_C equals the ``contact_force`` column at every level, 1 and 2 ranks."""
 
