@@ -217,11 +217,11 @@ def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdi
     log.info("done in %.1f s: t = %g, zeta_min = %.6g, contact force = %.6g", seconds,
              last["t"], last["zeta_min"], last["contact_force"])
     if plan is not None:
-        worst = sensors[0].worst
+        largest = sensors[0].largest
         log.info("estimated error %.3e (space %.3e, time %.3e; max over levels) for tolerance %.3e: P%d, order %d, "
-                 "k = %g, %d cells", worst["total"], worst["space"], worst["time"], plan.tolerance, plan.degree,
+                 "k = %g, %d cells", largest.total, largest.space, largest.time, plan.tolerance, plan.degree,
                  plan.order, plan.k, model.geo.num_cells())
-        if worst["total"] > plan.tolerance:
+        if largest.total > plan.tolerance:
             log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
                      "mesh was too small); run again with a smaller tolerance")
     log.info("results in %s (%s for ParaView, %s, %s)", outdir, layout.SOLUTION, layout.TIMESERIES, layout.CONFIG)

@@ -4,7 +4,8 @@ Callers decide by type and fields, never by the message text:
 
 - :class:`InputError` (exit code 2): the user's input is wrong. :class:`ConfigError` for a
   scene (``key``, ``value``, ``allowed``, ``source``), :class:`UsageError` for the command
-  line and the results directory (:class:`ResultsError` for a damaged one: ``path``, ``reason``),
+  line and the results directory (:class:`OutputDirectoryError` for one a run may not write to: ``directory``,
+  ``problem``, ``existing``; :class:`ResultsError` for a damaged one: ``path``, ``reason``),
   :class:`ToleranceError` for a tolerance out of reach
   (``tolerance``, ``estimate``, ``dofs``, ``limit``, ``predicted``), :class:`RigidMotionError` for supports that
   leave a rigid motion free (``motions``).
@@ -19,6 +20,7 @@ Callers decide by type and fields, never by the message text:
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 # displacement-solver reasons -> the failure's kind
@@ -59,6 +61,19 @@ class ConfigError(InputError):
 
 class UsageError(InputError):
     """A mistake on the command line or with the results directory (exit code 2)."""
+
+
+class OutputDirectoryError(UsageError):
+    """A results directory a run may not write to (exit code 2 on the command line).
+
+    ``directory``: the one asked for; ``problem``: one of :attr:`PROBLEMS`; ``existing``: the earlier results found
+    there (``fields/`` for the series' data), for ``"earlier results"``."""
+
+    PROBLEMS = ("not a directory", "earlier results", "no checkpoint", "cannot write")
+
+    def __init__(self, message: str, directory: Any, problem: str, existing: tuple[str, ...] = ()) -> None:
+        self.directory, self.problem, self.existing = Path(directory), problem, tuple(existing)
+        super().__init__(message)
 
 
 class ResultsError(UsageError):

@@ -7,8 +7,7 @@ import pytest
 from conftest import ROOT, run_cli
 
 from solver import api
-from solver.errors import ConfigError, UsageError
-from solver.io.layout import OutputDirectoryError
+from solver.errors import ConfigError, OutputDirectoryError, UsageError
 from solver.post.results import read_csv, read_results
 
 EXAMPLE1 = ROOT / "configs" / "example1.toml"

@@ -25,9 +25,10 @@ from mpi4py import MPI
 
 from solver.config import Config, OutputConfig, dumps
 from solver.errors import ConfigError
+from solver.io import layout
 from solver.io.files import on_rank0
 
-NAME = "checkpoint.h5"
+NAME = layout.CHECKPOINT
 
 
 def scene_hash(cfg: Config) -> str:

@@ -116,7 +116,7 @@ class CellStresses:
 
     def _cell_average(self, memory: np.ndarray, source, points: RowMap, width: int) -> np.ndarray:
         """Cell averages of a memory tensor at the rule's points (rows of ``width``)."""
-        weight = getattr(self.history, "current_weight", None)
+        weight = self.history.current_weight
         if weight is not None and float(weight.value) != 0.0:
             # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
             memory = memory + float(weight.value) * source()

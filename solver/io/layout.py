@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from solver.errors import UsageError
+from solver.errors import OutputDirectoryError
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -131,19 +131,6 @@ class Wording:
 
 CLI = Wording("--output", "--overwrite", "--restart")
 API = Wording("output", "overwrite=True", None)
-
-
-class OutputDirectoryError(UsageError):
-    """A results directory a run may not write to (exit code 2 on the command line).
-
-    ``directory``: the one asked for; ``problem``: one of :attr:`PROBLEMS`; ``existing``: the earlier results found
-    there (``fields/`` for the series' data), for ``"earlier results"``."""
-
-    PROBLEMS = ("not a directory", "earlier results", "no checkpoint", "cannot write")
-
-    def __init__(self, message: str, directory: Path, problem: str, existing: tuple[str, ...] = ()) -> None:
-        self.directory, self.problem, self.existing = Path(directory), problem, tuple(existing)
-        super().__init__(message)
 
 
 def prepare(comm: MPI.Comm, directory: Path, overwrite: bool = False, restart: bool = False, dry: bool = False,

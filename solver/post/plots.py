@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import UsageError
+from solver.io.layout import ResultsDir
 from solver.post.results import read_csv, read_profile, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
 
 
@@ -217,7 +218,8 @@ TIMESERIES_COLUMNS = ("t", "contact_force", "zeta_min", "strain_norm")
 
 def _read_tables(directory: Path) -> tuple[list[dict] | None, dict | None]:
     """timeseries.csv's rows and contact.csv's profiles (None where the file is absent), read before any picture."""
-    csv_path, contact = directory / "timeseries.csv", directory / "contact.csv"
+    files = ResultsDir(directory)
+    csv_path, contact = files.timeseries, files.contact
     rows = read_csv(csv_path, need=TIMESERIES_COLUMNS) if csv_path.exists() else None
     return rows, (read_profile(contact) if contact.exists() else None)
 

@@ -5,8 +5,9 @@ import pytest
 from conftest import solve
 
 from solver.config import from_dict
+from solver.errors import OutputDirectoryError
 from solver.io import checkpoint, layout
-from solver.io.layout import API, CLI, OutputDirectoryError, ResultsDir, prepare, timeseries_columns
+from solver.io.layout import API, CLI, ResultsDir, prepare, timeseries_columns
 
 # a contact scene that writes every file of a plain run: the series, the profile, a checkpoint
 SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.3, "k": 0.1}, "output": {"checkpoint_every": 1}}

@@ -30,11 +30,6 @@ class ErrorSensor:
         self.plan = plan
         self.largest = Largest()
 
-    @property
-    def worst(self) -> dict[str, float]:
-        """:attr:`largest` by name ("space", "time", "total"), as solver/cli.py reads it."""
-        return {"space": self.largest.space, "time": self.largest.time, "total": self.largest.total}
-
     def __call__(self, row: dict) -> dict:
         space = self.plan.C * self.est.total() + self.plan.estimate.space_zeta
         tim = self.plan.time_error(row["t"])
