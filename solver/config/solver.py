@@ -25,7 +25,7 @@ class SolverConfig:
 
     ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
     again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
-    up to newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
+    up to damped_newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
     levels); false: such a level fails at ``max_it``.
 
     ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's

@@ -4,7 +4,7 @@ first level it does not (docs/model.md §4).
 Where the contact zone stays put, a Newton level is one solve with a reused factorization; there newton_condensed
 pays two or three solves with K per level. Where the zone moves by many points per level, plain semismooth Newton
 cycles between active sets and its damped fallback takes tens of iterations, each a factorization of K + C, while
-newton_condensed solves those levels on the contact dofs with K's one factorization (docs/benchmarks/methods.md).
+newton_condensed solves those levels on the contact dofs with K's one factorization (measured: docs/model.md §4).
 So a run starts with Newton, without its fallback and with at most NEWTON_ITERATIONS iterations a level, and at
 the first level Newton does not solve (a cycle of active sets, no convergence, a failed linear solve) that level is
 solved again from its start by the take-over method, and so is every later one. The switch depends on the iterates
@@ -26,7 +26,7 @@ from solver.solvers.method import DisplacementMethod
 from solver.solvers.newton import NewtonSolver
 
 # Newton's iterations on a level before auto hands it over (of solver.max_it): a level Newton has not solved in 8
-# is one whose active set keeps changing (docs/benchmarks/methods.md)
+# is one whose active set keeps changing (the measurements: docs/model.md §4)
 NEWTON_ITERATIONS = 8
 
 

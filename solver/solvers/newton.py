@@ -40,8 +40,8 @@ from solver.solvers.method import DisplacementMethod
 from solver.solvers.settings import LinearSettings, NewtonSettings
 
 # a node of Gamma_C holds u . n (its normal leaves the near-nullspace) where the contact's stiffness (1/mu) int phi ds
-# is this many times K's diagonal there: 3-D Example 1 has 5e5 at mu = 1e-10 (n = 32), 0.05 at mu = 1e-3, where taking
-# the normal out cost level 0 iterations (16.7 -> 29 at 36,501 dofs, benchmarks/results/krylov_contact.md)
+# is this many times K's diagonal there; where the contact is soft, taking the normal out costs Krylov iterations
+# (docs/benchmarks/performance.md, "Krylov iterations and the contact stiffness")
 STIFF_CONTACT_RATIO = 100.0
 
 
@@ -70,8 +70,8 @@ class NewtonTest:
 
     With 1/mu ~ 1e10 the residual has a round-off floor ~ eps ||J|| ||u|| that can exceed rtol * scale; a
     correction below rtol ||u|| then means the active set is settled and the direct solve exact. While the
-    cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE): on the
-    hard scene of tests/solvers/test_damped_newton.py the failing level stops after 9 of its 25 iterations.
+    cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE) instead
+    of running on to max_it.
     """
 
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from solver.solvers.condensed import PointContact
 
 # the first step's active set is the one at v + PREDICT (v - v_prev), v_prev the last level's start: half the last
-# level's motion (docs/benchmarks/methods.md)
+# level's motion, measured best (docs/model.md §4)
 PREDICT = 0.5
 
 
