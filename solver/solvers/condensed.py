@@ -47,6 +47,7 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from solver.errors import ConfigError
 from solver.physics.contact_points import ContactPoints, law_pressure
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
@@ -206,7 +207,8 @@ class CondensedNewtonSolver(DisplacementMethod):
         core = energy.core
         problem = core.problem
         if not applies(problem, linear, dofs.m):
-            raise ValueError("newton_condensed does not apply to this problem: build newton_energy instead")
+            raise ConfigError(key="solver.method", value="newton_condensed",
+                              allowed="does not apply here (condensed.applies): methods.py builds newton_energy")
         self.energy, self.core, self.problem, self.test = energy, core, problem, energy.test
         self.dofs, self.linear = dofs, linear
         # the contact term at its points on B (2-D): the reduced iteration of PointReduced; else Reduced's forms

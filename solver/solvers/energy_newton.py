@@ -29,6 +29,7 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from solver.errors import ConfigError
 from solver.physics.displacement import SolveInfo
 from solver.solvers.damped_newton import DampedResult, along, has_energy, line_minimum
 from solver.solvers.linear import REASONS_SNES
@@ -46,7 +47,8 @@ class EnergyNewtonSolver(DisplacementMethod):
     def __init__(self, core: NewtonCore) -> None:
         problem = core.problem
         if not has_energy(problem):
-            raise ValueError("newton_energy needs a contact energy (no implicit memory term): build Newton instead")
+            raise ConfigError(key="solver.method", value="newton_energy",
+                              allowed="needs a contact energy (no implicit memory term): methods.py builds newton")
         self.core, self.problem = core, problem
         self.test = NewtonTest(core.settings.rtol, core.settings.max_it, core.cycles, problem.contact)
         self._work = [problem.u.vector.duplicate() for _ in range(4)]

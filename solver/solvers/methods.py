@@ -26,6 +26,7 @@ import numpy as np
 from mpi4py import MPI
 
 from solver.config import BoundaryConfig
+from solver.errors import ConfigError
 from solver.mesh.geometry import Geometry
 from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem
@@ -126,7 +127,8 @@ def resolve(name: str, ctx: MethodContext) -> str:
     entry = METHODS[name]
     while not entry.requires(ctx):
         if entry.instead is None:
-            raise ValueError(f"solver.method {name!r} does not apply to this problem and has nothing instead")
+            raise ConfigError(key="solver.method", value=name, allowed="does not apply to this problem (it needs the "
+                              "contact term at its points: a 2-D mesh) and has no method instead")
         name = entry.instead
         entry = METHODS[name]
     return name

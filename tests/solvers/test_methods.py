@@ -7,6 +7,7 @@ from conftest import ROOT
 
 from solver.config import METHODS as SCENE_METHODS
 from solver.config import from_dict, load
+from solver.errors import ConfigError
 from solver.run.model import build_model
 from solver.solvers.auto import NEWTON_ITERATIONS, AutoSolver
 from solver.solvers.condensed import CondensedNewtonSolver
@@ -85,7 +86,7 @@ def test_a_point_method_needs_the_points(comm):
     ctx = MethodContext(mech.problem, mech.settings, comm, model.geo, mech.physics.parts, None)
     assert resolve("newton_condensed", ctx) == "newton_condensed"
     for name in ("fixed_point", "penalty_duality"):
-        with pytest.raises(ValueError, match=name):
+        with pytest.raises(ConfigError, match=name):
             resolve(name, ctx)
 
 
@@ -104,3 +105,17 @@ def test_what_a_checkpoint_carries_is_declared(comm):
     auto = _model(comm, "auto").mech
     assert set(auto.state()) == {"F_last", "b", "predictor"}
     assert set(auto.scalars()) == {"c_norm", "reuse", "switched_at", "levels"}
+
+
+def test_a_method_built_where_it_does_not_apply_is_refused(comm):
+    """The classes check their requirement (the registry builds their instead): newton_energy without an energy,
+    newton_condensed with an iterative solver."""
+    newton = _model(comm, "newton_energy", ["memory.rule='trapezoid'"]).mech.solver
+    with pytest.raises(ConfigError, match="newton_energy"):
+        EnergyNewtonSolver(newton.core)
+    model = _model(comm, "newton_condensed", ["solver.linear='iterative'"])
+    energy = model.mech.solver
+    with pytest.raises(ConfigError, match="newton_condensed"):
+        CondensedNewtonSolver(energy, MethodContext(model.mech.problem, model.mech.settings, comm, model.geo,
+                                                    model.mech.physics.parts, None).contact_dofs,
+                              model.mech.settings.linear)
