@@ -240,11 +240,11 @@ class CondensedNewtonSolver(DisplacementMethod):
         core = self.core
         if self.cond is None:
             self.cond = Condensation(self.problem, self.dofs, self.problem.u.function_space.mesh.comm, self.linear)
-            core.factorizations += 1
+            core.count_factorizations(1)  # K's
             first = 1
         else:
             first = 0
-        self.test.scale = scale
+        self.test.start_level(scale)
         if self.points is not None:
             reduced = PointReduced(self.cond, self.problem, self.reduced_work, core.settings, scale, self.points,
                                    self.previous)
@@ -273,7 +273,7 @@ class CondensedNewtonSolver(DisplacementMethod):
             ksp.setOperators(self.problem.J, self.problem.J)
             full = self.energy.iterate(ksp)
             self.problem.u.x.scatter_forward()
-            core.factorizations += full.factorizations
+            core.count_factorizations(full.factorizations)
             full.iterations += out.iterations
             full.history = [*out.history[:-1], *full.history]  # its first is out's last
             out = full

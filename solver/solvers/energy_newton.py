@@ -60,13 +60,13 @@ class EnergyNewtonSolver(DisplacementMethod):
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
         core = self.core
-        self.test.scale = scale
+        self.test.start_level(scale)
         ksp = core.ksp
         ksp.setOperators(self.problem.J, self.problem.J)
         core.krylov_tolerance.apply(ksp, scale)
         out = self.iterate(ksp)
         self.problem.u.x.scatter_forward()
-        core.factorizations += out.factorizations
+        core.count_factorizations(out.factorizations)
         name = REASONS_SNES.get(out.reason, str(out.reason))
         return self.finish(out, name, scale)
 

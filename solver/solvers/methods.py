@@ -78,12 +78,16 @@ def _condensed_on(ctx: MethodContext, core: NewtonCore) -> CondensedNewtonSolver
     return CondensedNewtonSolver(EnergyNewtonSolver(core), ctx.contact_dofs, ctx.settings.linear, ctx.points)
 
 
-def _condensation_applies(ctx: MethodContext) -> bool:
-    return has_energy(ctx.problem) and applies(ctx.problem, ctx.settings.linear, ctx.contact_dofs.m)
-
-
 def _newton(ctx: MethodContext) -> NewtonSolver:
     return NewtonSolver(_core(ctx), ctx.settings.newton.fallback)
+
+
+def _newton_energy(ctx: MethodContext) -> EnergyNewtonSolver:
+    return EnergyNewtonSolver(_core(ctx))
+
+
+def _newton_condensed(ctx: MethodContext) -> CondensedNewtonSolver:
+    return _condensed_on(ctx, _core(ctx))
 
 
 # the methods auto hands a failed level over to, built on Newton's core (its SNES's KSP)
@@ -103,22 +107,35 @@ def _auto(ctx: MethodContext) -> AutoSolver:
     return AutoSolver(NewtonSolver(core, fallback=False), TAKEOVERS[takeover](ctx, core))
 
 
+def _fixed_point(ctx: MethodContext) -> FixedPointSolver:
+    return FixedPointSolver(ctx.problem, ctx.points, ctx.settings.points, ctx.settings.linear, ctx.comm)
+
+
+def _penalty_duality(ctx: MethodContext) -> PenaltyDualitySolver:
+    return PenaltyDualitySolver(ctx.problem, ctx.points, ctx.settings.points, ctx.settings.linear, ctx.comm, ctx.geo,
+                                ctx.parts)
+
+
+def _has_energy(ctx: MethodContext) -> bool:
+    return has_energy(ctx.problem)
+
+
+def _condensation_applies(ctx: MethodContext) -> bool:
+    return has_energy(ctx.problem) and applies(ctx.problem, ctx.settings.linear, ctx.contact_dofs.m)
+
+
 def _points_2d(ctx: MethodContext) -> bool:
     return ctx.points is not None
 
 
+# name -> (build, requires, instead): one line a method
 METHODS: dict[str, MethodEntry] = {
     "newton": MethodEntry(_newton),
-    "newton_energy": MethodEntry(lambda ctx: EnergyNewtonSolver(_core(ctx)), lambda ctx: has_energy(ctx.problem),
-                                 "newton"),
-    "newton_condensed": MethodEntry(lambda ctx: _condensed_on(ctx, _core(ctx)), _condensation_applies,
-                                    "newton_energy"),
+    "newton_energy": MethodEntry(_newton_energy, _has_energy, "newton"),
+    "newton_condensed": MethodEntry(_newton_condensed, _condensation_applies, "newton_energy"),
     "auto": MethodEntry(_auto),
-    "fixed_point": MethodEntry(lambda ctx: FixedPointSolver(ctx.problem, ctx.points, ctx.settings.points,
-                                                            ctx.settings.linear, ctx.comm), _points_2d),
-    "penalty_duality": MethodEntry(lambda ctx: PenaltyDualitySolver(ctx.problem, ctx.points, ctx.settings.points,
-                                                                    ctx.settings.linear, ctx.comm, ctx.geo,
-                                                                    ctx.parts), _points_2d),
+    "fixed_point": MethodEntry(_fixed_point, _points_2d),
+    "penalty_duality": MethodEntry(_penalty_duality, _points_2d),
 }
 
 

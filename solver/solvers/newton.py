@@ -76,7 +76,11 @@ class NewtonTest:
 
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:
         self.rtol, self.max_it, self.cycles, self.contact = rtol, max_it, cycles, contact
-        self.scale = 1.0  # the level's force scale
+        self.scale = 1.0  # the level's force scale (:meth:`start_level`)
+
+    def start_level(self, scale: float) -> None:
+        """A new level, whose force scale is ``scale`` (||F|| <= rtol * scale)."""
+        self.scale = scale
 
     def __call__(self, it: int, xnorm: float, snorm: float, fnorm: float) -> int:
         """The SNES reason after iteration ``it`` (ITERATING to go on)."""
@@ -159,6 +163,10 @@ class NewtonCore:
         check_options(comm, self.prefix, defaults, linear.petsc_options, snes=True)
         self.options = OwnOptions(self, self.prefix, defaults, linear.petsc_options)
         self.snes = make_snes(comm, self.options.prefix, problem, settings, self._residual, self._jacobian, self.test)
+
+    def count_factorizations(self, n: int) -> None:
+        """Count ``n`` factorizations (set-ups) made by a method's own iteration on the core's KSP or beside it."""
+        self.factorizations += n
 
     @property
     def ksp(self) -> PETSc.KSP:
@@ -245,7 +253,7 @@ class NewtonSolver(DisplacementMethod):
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
         core = self.core
-        core.test.scale = scale
+        core.test.start_level(scale)
         core.krylov_tolerance.apply(core.ksp, scale)
         core.carry_first_residual()
         f0 = core.factorizations
@@ -256,7 +264,7 @@ class NewtonSolver(DisplacementMethod):
             cycled = False  # the fallback's own reason names its outcome
             reason, history, its, factorizations = self.fallback.take_over(
                 core.ksp, core.test, list(history[:its + 1]), its, core.iterative)
-            core.factorizations += factorizations
+            core.count_factorizations(factorizations)
         name = CYCLE if (cycled and reason < 0) else REASONS_SNES.get(reason, str(reason))
         return core.outcome(reason, name, history, its, scale, core.factorizations - f0,
                             self.fallback.krylov_iterations)
