@@ -109,7 +109,7 @@ def run_case(n: int, k: float, T: float, kernel: str = "constant", every: int | 
         output["disk_bytes"] = comm.bcast(output["disk_bytes"], root=0)
 
     mech, dmg = model.mech, model.damage
-    ksp = mech.solver.snes.getKSP()
+    ksp = mech.solver.core.ksp  # the Newton-type methods' KSP on J
     ops = mech.ops
     x = ops.b.duplicate()
     floor = {

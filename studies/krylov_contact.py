@@ -43,9 +43,6 @@ def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -
     from solver.config import load
     from solver.io.results import run
     from solver.run.model import build_model
-    from solver.solvers import newton
-
-    newton.CONTACT_NEAR_NULLSPACE = nullspace == "contact"
 
     cfg = load(ROOT / "configs" / "example1_3d.toml",
                [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", "time.k=0.02", "time.T=0.2", "output.xdmf=false",
@@ -54,7 +51,7 @@ def run_case(n: int, mu: float, nullspace: str = "contact", amg: str = "gamg") -
     from solver.errors import DisplacementSolveError
 
     try:
-        rows = run(build_model(cfg, MPI.COMM_WORLD), None)
+        rows = run(build_model(cfg, MPI.COMM_WORLD, contact_near_nullspace=nullspace == "contact"), None)
     except DisplacementSolveError as e:  # a preconditioner that fails is a result (gamg-reuse at mu = 1e-10)
         return {"n": n, "mu": mu, "nullspace": nullspace, "amg": amg, "dofs": 3 * (n + 1) ** 3, "failed": str(e)}
     steps = rows[1:]

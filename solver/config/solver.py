@@ -25,7 +25,7 @@ class SolverConfig:
 
     ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
     again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
-    up to newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
+    up to damped_newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
     levels); false: such a level fails at ``max_it``.
 
     ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's
@@ -73,11 +73,11 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
                        "use a direct solver: auto, petsc, mumps or redundant")
     if method not in NEWTON_METHODS and has_contact and scene["dim"] != 2:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
-    power = [b.name for b in scene["boundary"] if b.role == "contact" and b.law == "power"]
-    if method == "penalty_duality" and power:
+    curved = [b for b in scene["boundary"] if b.role == "contact" and not b.contact_law.piecewise_linear]
+    if method == "penalty_duality" and curved:
         # its multiplier step needs the resolvent of p - omega I in closed form, and omega ~ a bound of p'
-        raise ctx.fail("solver.method", method, f"does not support law 'power' (boundary.{power[0]}): p' is unbounded, "
-                       "so no omega fits; use 'newton' or 'fixed_point'")
+        raise ctx.fail("solver.method", method, f"does not support law {curved[0].law!r} (boundary.{curved[0].name}): "
+                       "p' is unbounded, so no omega fits; use 'newton' or 'fixed_point'")
     if scene["memory"].rule == "trapezoid" and method not in NEWTON_METHODS and has_contact:
         raise ctx.fail("memory.rule", "trapezoid", f"needs solver.method = 'newton' (not {method!r})")
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:

@@ -138,11 +138,6 @@ class DisplacementProblem:
         """True when the last level converged: ``F_last`` holds F(u_{n-1}) for ``b_prev``."""
         return self._carried
 
-    @carried.setter
-    def carried(self, converged: bool) -> None:
-        """The assignment the methods used before :meth:`level_converged` / :meth:`forget_level` (same effect)."""
-        self._carried = bool(converged)
-
     def level_converged(self) -> None:
         """The level converged at the last evaluated iterate: the next level starts from its residual."""
         self._carried = True

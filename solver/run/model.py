@@ -6,7 +6,6 @@ contact part. :class:`Model` holds the parts; :class:`solver.run.stepper.Stepper
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 from dolfinx import fem
@@ -23,7 +22,8 @@ from solver.physics.memory_source import MemorySource, OutOfPlaneSource
 from solver.physics.quadrature import QuadratureRule
 from solver.solvers.damage_step import Damage, DamageLinearSolve, make_damage
 from solver.solvers.linear import choose_linear
-from solver.solvers.mechanics import Mechanics
+from solver.solvers.mechanics import Mechanics, build_mechanics
+from solver.solvers.settings import MethodSettings
 
 
 @dataclass
@@ -40,12 +40,15 @@ class Model:
     mech: Mechanics
     scheme: TimeScheme
     u_prev: fem.Function | None = None  # u_{n-1} while level n is solved (time.order = 2: the extrapolation)
-    linear: str = "auto"  # the linear solver solver.linear resolves to on this mesh (linear.choose_linear)
 
     @property
     def comm(self) -> MPI.Comm:
         return self.geo.comm
 
+    @property
+    def linear(self) -> str:
+        """The linear solver solver.linear resolved to on this mesh (linear.choose_linear); cfg keeps the scene's."""
+        return self.mech.settings.linear.kind
 
 def time_scheme(cfg: Config) -> TimeScheme:
     """The scene's time scheme (memory rule, damage step, start-up), decided here once for the model."""
@@ -53,9 +56,9 @@ def time_scheme(cfg: Config) -> TimeScheme:
                              cfg.solver.damage_scheme)
 
 
-def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Model:
+def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None, contact_near_nullspace: bool = True) -> Model:
     """Mesh, spaces and the physics terms the scene switches on (``geo``: a mesh already made, e.g. refined,
-    instead of the scene's)."""
+    instead of the scene's; ``contact_near_nullspace``: see settings.NewtonSettings)."""
     scheme = time_scheme(cfg)
     sum_rule = SUM_RULES[scheme.memory_rule]
     geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim) if geo is None else geo
@@ -66,7 +69,8 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
     k, steps = cfg.time.k, cfg.time.steps
     dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
     linear = choose_linear(cfg.solver.linear, comm, geo.dim, dofs, cfg.solver.method, steps)
-    settings = dataclasses.replace(cfg.solver, linear=linear)  # cfg itself keeps the scene's value (restart's hash)
+    # the resolved linear solver's one truth; cfg itself keeps the scene's value (restart's hash)
+    settings = MethodSettings.from_config(cfg.solver, linear, contact_near_nullspace)
     damage = None
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))
@@ -90,7 +94,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None) -> Mod
         if mat.model == "plane_strain":  # sigma_33 has a memory part too
             out_of_plane = make_history(cfg.memory, scheme.memory_rule, rule, OutOfPlaneSource(rule, source), k, steps)
             history = PlaneStrainHistory(history, out_of_plane)
-    mech = Mechanics(geo, u, mat, cfg.boundaries, settings, history, implicit_term=implicit,
-                     body_force=cfg.body_force)
+    mech = build_mechanics(geo, u, mat, cfg.boundaries, settings, history, implicit_term=implicit,
+                           body_force=cfg.body_force)
     u_prev = fem.Function(V, name="displacement_previous") if history is not None and history.extrapolated else None
-    return Model(cfg, geo, u, zeta, damage, history, rule, mech, scheme, u_prev, linear)
+    return Model(cfg, geo, u, zeta, damage, history, rule, mech, scheme, u_prev)

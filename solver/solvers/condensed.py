@@ -1,8 +1,9 @@
 """Newton on the contact dofs alone (``solver.method = "newton_condensed"``; docs/model.md §4).
 
-K is assembled once per run, and the contact term j(u) of a level acts only on the dofs of the contact facets
-(B, the Dirichlet ones left out: a Lagrange trace on a facet depends on the facet's dofs only). Writing c = j_B(u)
-for the contact force on them, the level's F(u) = K u + j(u) - b = 0 is
+It relies on the problem's split (:class:`solver.physics.displacement.FixedSplit`, the level problem of
+:mod:`solver.physics.level`): F(u) = K u + j(u) - b with K fixed for the run. The contact term j(u) of a level acts
+only on the dofs of the contact facets (B, the Dirichlet ones left out: a Lagrange trace on a facet depends on the
+facet's dofs only). Writing c = j_B(u) for the contact force on them, F(u) = 0 is
 
     u = u0 - K^{-1} P^T c,      u0 = K^{-1} b        (P: the restriction to B),
 
@@ -29,8 +30,12 @@ In 2-D (linear and limited-penetration laws) the iteration on v runs on the cont
 from the kinks of the piecewise-quadratic E, the active set looking ahead along the step after a damped one, and a
 first set predicted from the last two levels (docs/model.md §4).
 
-Only where it applies (:func:`applies`): a contact energy (no implicit memory term), a piecewise linear law, a
-direct linear solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the method is newton_energy.
+The parts: :mod:`contact_dofs` (B, C_BB), :mod:`condensation` (K's factorization, S, u0), :mod:`reduced` (the
+iteration on v), :class:`PointContact` (the contact term at its points on B) and :class:`CondensedNewtonSolver`
+(a level: the iteration on v, the steps through K, energy_newton's iteration where they do not settle it).
+
+It requires (:func:`applies`) a contact energy (no implicit memory term), a piecewise linear law, a direct linear
+solver and at most MAX_CONTACT_DOFS contact dofs; elsewhere the registry builds newton_energy (methods.py).
 """
 
 from __future__ import annotations
@@ -43,74 +48,28 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from solver.config import SolverConfig
+from solver.errors import ConfigError
 from solver.laws.contact import PointLaws
 from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
-from solver.solvers.damped_newton import DampedResult, has_energy, illinois_root
-from solver.solvers.energy_newton import FREE_STEPS, EnergyNewtonSolver
-from solver.solvers.linear import REASONS_SNES, OwnOptions, direct_options
+from solver.solvers.condensation import Condensation
+from solver.solvers.contact_dofs import ContactDofs, contact_block
+from solver.solvers.damped_newton import DampedResult, has_energy
+from solver.solvers.energy_newton import EnergyNewtonSolver
+from solver.solvers.linear import REASONS_SNES
+from solver.solvers.method import DisplacementMethod
+from solver.solvers.reduced import PointReduced, Reduced
+from solver.solvers.settings import LinearSettings
 
 MAX_CONTACT_DOFS = 3000  # S is dense: m^2 doubles on every rank, m solves with K to build it
 POLISH_STEPS = 3  # full Newton steps solved through K after the condensed iteration, before a factorization
-# the first step's active set is the one at v + PREDICT (v - v_prev), v_prev the last level's start: half the last
-# level's motion guessed best on hard.toml with P2 (n = 16 / 32 / 48: 160 / 193 / 197 iterations at 0.5, 165 / 214 /
-# 220 at 1, 179 / 222 / 228 without a prediction; scripts/nonlinear_bench.py's cases)
-PREDICT = 0.5
 
 
-def applies(problem: DisplacementProblem, settings: SolverConfig, m: int) -> bool:
+def applies(problem: DisplacementProblem, linear: LinearSettings, m: int) -> bool:
     """Whether the condensation holds: an energy, a piecewise linear law, a direct solver, m small enough."""
-    return (has_energy(problem) and problem.contact.piecewise_linear and settings.linear != "iterative"
+    return (has_energy(problem) and problem.contact.piecewise_linear and not linear.iterative
             and 0 < m <= MAX_CONTACT_DOFS)
-
-
-class ContactDofs:
-    """The free dofs of the contact facets: this rank's owned ones (local indices) and the global order of all
-    m of them (rank by rank), with the gathering of their values."""
-
-    def __init__(self, u: fem.Function, facets: np.ndarray, fdim: int, bcs, comm: MPI.Comm) -> None:
-        V = u.function_space
-        bs = V.dofmap.index_map_bs
-        owned = V.dofmap.index_map.size_local * bs
-        blocks = fem.locate_dofs_topological(V, fdim, facets)
-        local = np.unique((blocks[:, None] * bs + np.arange(bs)[None, :]).ravel())
-        local = local[local < owned]
-        probe = u.vector.duplicate()
-        free = _free_mask(probe, bcs)
-        probe.destroy()
-        self.local = local[free[local]].astype(np.int32)
-        self.comm = comm
-        counts = comm.allgather(len(self.local))
-        self.counts, self.m = counts, int(sum(counts))
-        self.offset = int(sum(counts[:comm.rank]))
-        self.global_index: np.ndarray | None = None  # their global indices (set at the first use)
-
-    def gather(self, values: np.ndarray) -> np.ndarray:
-        """All m values from each rank's owned ones (in the global order)."""
-        if self.comm.size == 1:
-            return np.array(values, dtype=float)
-        out = np.empty(self.m)
-        self.comm.Allgatherv(np.ascontiguousarray(values, dtype=float), [out, self.counts])
-        return out
-
-    def mine(self, values: np.ndarray) -> np.ndarray:
-        """This rank's part of a global m-vector."""
-        return values[self.offset:self.offset + len(self.local)]
-
-
-def _free_mask(x: PETSc.Vec, bcs) -> np.ndarray:
-    """True at the owned dofs no Dirichlet condition holds (set_bc with two x0 differ exactly there)."""
-    one = x.duplicate()
-    one.set(1.0)
-    x.set(0.0)
-    fpetsc.set_bc(x, bcs, one, 1.0)  # g - 1 on the prescribed dofs, 0 elsewhere
-    a = x.array_r.copy()
-    x.set(0.0)
-    fpetsc.set_bc(x, bcs)  # g there
-    one.destroy()
-    return a == x.array_r
 
 
 class PointContact:
@@ -228,78 +187,26 @@ class PointContact:
         return float(lam), self.state(r + after * s)
 
 
-class Condensation:
-    """S = P K^{-1} P^T and its Cholesky factor, K's factorization, and the level's u0 = K^{-1} b."""
+class CondensedNewtonSolver(DisplacementMethod):
+    """The contact levels solved on the contact dofs first, then checked (and finished) in the full space by
+    Newton steps through K, and by ``energy``'s iteration where those do not settle a level (module docstring).
+    Requires :func:`applies`; ``points``: the contact term at its points (2-D), for :class:`PointReduced`."""
 
-    def __init__(self, problem: DisplacementProblem, dofs: ContactDofs, comm: MPI.Comm, linear: str) -> None:
-        self.problem, self.dofs = problem, dofs
-        self.ksp = PETSc.KSP().create(comm)
-        # options of its own, removed with it: a process that builds many models (a study, a sweep from
-        # Python) would otherwise fill PETSc's options database (PETSc error 55 after some hundred)
-        self.options = OwnOptions(self, "mech_condensed_", direct_options(comm, linear, True), ())
-        self.ksp.setOptionsPrefix(self.options.prefix)
-        self.ksp.setOperators(problem.stiffness())  # K, also after Newton steps wrote K + C into its storage (auto)
-        self.ksp.setFromOptions()
-        # K's factorization stays K's when a later full Newton iteration (newton_energy's, where the steps through
-        # K do not settle a level) adds C into the same storage: PETSc would otherwise refactor it at the next solve
-        self.ksp.getPC().setReusePreconditioner(True)
-        self.u0 = problem.u.vector.duplicate()
-        self._e = problem.u.vector.duplicate()
-        self._z = problem.u.vector.duplicate()
-        self.S = self._schur()
-        self.chol = sla.cho_factor(self.S)
-
-    def _schur(self) -> np.ndarray:
-        """S, column by column: m solves with K (collective)."""
-        dofs, e, z = self.dofs, self._e, self.u0
-        rows = np.empty((len(dofs.local), dofs.m))
-        for j in range(dofs.m):
-            e.set(0.0)
-            if dofs.offset <= j < dofs.offset + len(dofs.local):
-                e.array[dofs.local[j - dofs.offset]] = 1.0
-            self.ksp.solve(e, z)
-            rows[:, j] = z.array_r[dofs.local]
-        if dofs.comm.size == 1:
-            S = rows
-        else:
-            S = np.vstack(dofs.comm.allgather(rows))
-        return 0.5 * (S + S.T)  # symmetric up to round-off
-
-    def level(self) -> np.ndarray:
-        """u0 = K^{-1} b_n with the Dirichlet values of the level; returns P u0 (all m)."""
-        self.ksp.solve(self.problem.ops.b, self.u0)
-        fpetsc.set_bc(self.u0, self.problem.bcs)
-        return self.dofs.gather(self.u0.array_r[self.dofs.local])
-
-    def rebuild(self, c: np.ndarray, x: PETSc.Vec) -> None:
-        """x = u0 - K^{-1} P^T c: the displacement in equilibrium inside for the contact forces c."""
-        self.u0.copy(x)
-        self.add_column_solve(-c, x)
-
-    def add_column_solve(self, c: np.ndarray, x: PETSc.Vec) -> None:
-        """x += K^{-1} P^T c (one solve with K)."""
-        self._e.set(0.0)
-        self._e.array[self.dofs.local] = self.dofs.mine(c)
-        self.ksp.solve(self._e, self._z)
-        x.axpy(1.0, self._z)
-
-
-class CondensedNewtonSolver(EnergyNewtonSolver):
-    """:class:`EnergyNewtonSolver` whose contact levels are solved on the contact dofs first (module docstring);
-    where the condensation does not apply, energy_newton's method."""
-
-    def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm, facets: np.ndarray,
-                 fdim: int, points: ContactPoints | None = None) -> None:
-        super().__init__(problem, settings, comm)
-        self.dofs = ContactDofs(problem.u, facets, fdim, problem.bcs, comm) if self.energy else None
-        self.on = self.energy and applies(problem, settings, self.dofs.m)
+    def __init__(self, energy: EnergyNewtonSolver, dofs: ContactDofs, linear: LinearSettings,
+                 points: ContactPoints | None = None) -> None:
+        core = energy.core
+        problem = core.problem
+        if not applies(problem, linear, dofs.m):
+            raise ConfigError(key="solver.method", value="newton_condensed",
+                              allowed="does not apply here (condensed.applies): methods.py builds newton_energy")
+        self.energy, self.core, self.problem, self.test = energy, core, problem, energy.test
+        self.dofs, self.linear = dofs, linear
         # the contact term at its points on B (2-D): the reduced iteration of PointReduced; else Reduced's forms
-        self.points = PointContact(points, self.dofs, problem.u) if self.on and PointContact.applies(points) \
-            else None
+        self.points = PointContact(points, dofs, problem.u) if PointContact.applies(points) else None
         self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
         self.reduced_iterations = 0  # over the run
         self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start
-        self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)] if self.on else []
+        self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)]
 
     def state(self) -> dict[str, np.ndarray]:
         """What a checkpoint carries besides u: the predictor's last level start on the contact dofs (owned dofs,
@@ -320,18 +227,22 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
 
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level on the contact dofs, rebuild u, check (and finish) it with the full iteration."""
-        if not self.on:
-            return super().solve(scale)
+        core = self.core
         if self.cond is None:
-            self.cond = Condensation(self.problem, self.dofs, self.problem.u.function_space.mesh.comm,
-                                     self.settings.linear)
-            self.factorizations += 1
+            self.cond = Condensation(self.problem, self.dofs, self.problem.u.function_space.mesh.comm, self.linear)
+            core.count_factorizations(1)  # K's
             first = 1
         else:
             first = 0
-        self.test.scale = scale
-        reduced = (PointReduced if self.points is not None else Reduced)(self, scale)
-        history, v, step = reduced.run()
+        self.test.start_level(scale)
+        if self.points is not None:
+            reduced = PointReduced(self.cond, self.problem, self.reduced_work, core.settings, scale, self.points,
+                                   self.previous)
+            history, v, step = reduced.run()
+            self.previous = reduced.start
+        else:
+            reduced = Reduced(self.cond, self.problem, self.reduced_work, core.settings, scale)
+            history, v, step = reduced.run()
         its = len(history)
         self.reduced_iterations += its
         if its > 0:  # else the level starts from u itself, as energy_newton's would
@@ -348,17 +259,17 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
             # C from the points differs from it by round-off, which 1/mu = 1e12 makes worth a second step)
         out = self._polish(history, step, piece)
         if out.reason < 0:  # not settled by Newton steps solved through K: energy_newton's full iteration
-            ksp = self.snes.getKSP()
+            ksp = core.ksp
             ksp.setOperators(self.problem.J, self.problem.J)
-            full = self._iterate(ksp)
+            full = self.energy.iterate(ksp)
             self.problem.u.x.scatter_forward()
-            self.factorizations += full.factorizations
+            core.count_factorizations(full.factorizations)
             full.iterations += out.iterations
             full.history = [*out.history[:-1], *full.history]  # its first is out's last
             out = full
         out.factorizations += first  # K's, once per run
         name = REASONS_SNES.get(out.reason, str(out.reason))
-        return self._finish(out, name, scale)
+        return self.energy.finish(out, name, scale)
 
     def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec, piece=None) -> float:
         """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
@@ -371,7 +282,7 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
             F.array[dofs.local] += dofs.mine(dj)
         else:
             assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
-            C = _block(problem.contact.C, dofs, u.getOwnershipRange()[0])
+            C = contact_block(problem.contact.C, dofs, u.getOwnershipRange()[0])
         cond.ksp.solve(F, d)  # K^{-1} F
         dB = -np.linalg.solve(np.eye(dofs.m) + cond.S @ C, dofs.gather(d.array_r[dofs.local]))
         d.scale(-1.0)
@@ -420,162 +331,3 @@ class CondensedNewtonSolver(EnergyNewtonSolver):
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         problem.u.x.scatter_forward()
         return out
-
-
-def _block(C: PETSc.Mat, dofs: ContactDofs, r0: int) -> np.ndarray:
-    """C_BB (m x m, on every rank) from the assembled contact Jacobian. Collective."""
-    rows = (dofs.local + r0).astype(np.int32)
-    if dofs.global_index is None:
-        dofs.global_index = np.concatenate(dofs.comm.allgather(rows)).astype(np.int32)
-    block = C.getValues(rows, dofs.global_index).reshape(len(rows), dofs.m) if len(rows) else np.empty((0, dofs.m))
-    return block if dofs.comm.size == 1 else np.vstack(dofs.comm.allgather(block))
-
-
-class Reduced:
-    """One level's iteration on v = P u (module docstring): Newton steps, full or with the exact line search."""
-
-    def __init__(self, solver: CondensedNewtonSolver, scale: float) -> None:
-        self.solver, self.cond, self.dofs = solver, solver.cond, solver.dofs
-        self.problem = solver.problem
-        self.x, self.F = solver.reduced_work  # the full vector the forms read (u0 with v on B), and j there
-        self.scale = scale
-
-    def evaluate(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, bytes]:
-        """H(v), C_BB(v) and the active set's fingerprint (C_BB's bytes). Collective."""
-        problem, dofs, x = self.problem, self.dofs, self.x
-        self.cond.u0.copy(x)
-        x.array[dofs.local] = dofs.mine(v)
-        problem.sync(x)
-        contact = problem.contact
-        with self.F.localForm() as f:
-            f.set(0.0)
-        fpetsc.assemble_vector(self.F, contact.residual_form)
-        self.F.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        jB = dofs.gather(self.F.array_r[dofs.local])
-        assemble_without_diagonal(contact.C, contact.jacobian_form, contact.bcs)
-        C = _block(contact.C, dofs, x.getOwnershipRange()[0])
-        H = v - self.cond.u0_B + self.cond.S @ jB
-        return H, C, C.tobytes()
-
-    def step_test(self, v: np.ndarray, d: np.ndarray) -> bool:
-        """NewtonTest's step test, on the full space: the full Newton step K^{-1} P^T S^{-1} d (d: its part on
-        B) below rtol ||u(v)||, u(v) = u0 - K^{-1} P^T S^{-1} (P u0 - v). Two solves with K."""
-        cond, x = self.cond, self.x
-        x.set(0.0)
-        cond.add_column_solve(sla.cho_solve(cond.chol, d), x)
-        step = x.norm()
-        cond.rebuild(sla.cho_solve(cond.chol, cond.u0_B - v), x)
-        return step <= self.solver.settings.rtol * x.norm()
-
-    def fnorm(self, H: np.ndarray) -> float:
-        """||F(u(v))|| = ||S^{-1} H||."""
-        return float(np.linalg.norm(sla.cho_solve(self.cond.chol, H)))
-
-    def run(self) -> tuple[list[float], np.ndarray, float]:
-        """Iterate from the current u's contact dofs; returns ||F|| before each step taken (one per iteration),
-        v (converged or not: the full iteration that follows decides) and the norm of the last step (0 if none)."""
-        cond, settings = self.cond, self.solver.settings
-        cond.u0_B = cond.level()
-        v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
-        H, C, key = self.evaluate(v)
-        fnorm, seen, history = self.fnorm(H), [key], []
-        snorm = 0.0
-        unorm = max(self.problem.u.vector.norm(), 1e-300)
-        for _ in range(settings.max_it * 8):
-            if fnorm <= settings.rtol * self.scale:
-                return history, v, snorm
-            d = -np.linalg.solve(np.eye(len(v)) + cond.S @ C, H)
-            y = v + d
-            Hy, Cy, keyy = self.evaluate(y)
-            if keyy == key:  # the step keeps v's active set: it solves v's quadratic piece, and is taken in the
-                return history, v, snorm  # full space by _polish (from u itself on the level's first iteration)
-            history.append(fnorm)
-            lam = 1.0
-            if keyy != key:
-                fy = self.fnorm(Hy)
-                full = keyy not in seen and (len(seen) <= FREE_STEPS or fy < fnorm)
-                if not full:
-                    lam = self._line_minimum(v, d, H)
-            if lam < 1.0:
-                v = v + lam * d
-                H, C, key = self.evaluate(v)
-            else:
-                v, H, C, key = y, Hy, Cy, keyy
-            seen.append(key)
-            fnorm = self.fnorm(H)
-            snorm = float(np.linalg.norm(d))  # B's part of the full step: the whole one only if this passes
-            if snorm <= settings.rtol * unorm and self.step_test(v, d):
-                return history, v, snorm
-        return history, v, snorm
-
-    def _line_minimum(self, v: np.ndarray, d: np.ndarray, H: np.ndarray) -> float:
-        """lam in (0, 1] minimizing E(v + lam d): the root of phi'(lam) = H(v + lam d).S^{-1} d (Illinois)."""
-        w = sla.cho_solve(self.cond.chol, d)
-
-        def dphi(lam: float) -> float:
-            return float(self.evaluate(v + lam * d)[0] @ w)
-
-        slope = float(H @ w)
-        if slope >= 0.0:
-            return 1.0
-        return illinois_root(dphi, slope)
-
-
-class PointReduced(Reduced):
-    """:class:`Reduced` with the contact term at its quadrature points (:class:`PointContact`), as an active-set
-    iteration: each step solves the quadratic piece of the level's energy that an active set names (the contact
-    law taken affine, p = r/mu, on its points), from the set predicted by the last two levels' contact dofs
-    (linear extrapolation) at the level's first step and from the set the last step reached after that. A step
-    whose end keeps its set has found the level's solution: _polish takes it through K. Otherwise the end is
-    taken where it is new and lowers ||F|| (or on the level's first FREE_STEPS), else the exact minimum of the
-    level's energy along the step (from the kinks) with the set just beyond it along the step (a point the line
-    search stopped at, entering contact, is in it: the directional derivative). Every evaluation is a sparse
-    product on the m contact dofs, not a facet assembly."""
-
-    def run(self) -> tuple[list[float], np.ndarray, float]:
-        cond, settings, pc, solver = self.cond, self.solver.settings, self.solver.points, self.solver
-        cond.u0_B = cond.level()
-        cond.u0.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        with cond.u0.localForm() as local:
-            pc.level(local.array_r)
-        a, S = cond.u0_B, cond.S
-        v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
-        r = pc.NB @ v + pc.c
-        state = pc.state(r)
-        fnorm = self.fnorm(v - a + S @ pc.force(r))
-        if solver.previous is not None and PREDICT > 0.0:  # the set the last two levels' motion leads to
-            state = pc.state(pc.NB @ (v + PREDICT * (v - solver.previous)) + pc.c)
-        solver.previous = v
-        seen, history = [state.tobytes()], []
-        snorm = 0.0
-        unorm = max(self.problem.u.vector.norm(), 1e-300)
-        eye = np.eye(len(v))
-        for _ in range(settings.max_it * 8):
-            self.state = state
-            if fnorm <= settings.rtol * self.scale:
-                self.state = None
-                return history, v, snorm
-            Hp = v - a + S @ pc.piece_force(r, state)  # H of the set's quadratic piece (H itself on v's set)
-            d = -np.linalg.solve(eye + S @ pc.jacobian(state), Hp)
-            s = pc.NB @ d
-            ry = r + s
-            statey = pc.state(ry)
-            if np.array_equal(statey, state):  # the step solves its piece and stays in it: _polish takes it
-                return history, v, snorm
-            history.append(fnorm)
-            y = v + d
-            fy = self.fnorm(y - a + S @ pc.force(ry))
-            if statey.tobytes() not in seen and (len(seen) <= FREE_STEPS or fy < fnorm):
-                v, r, state, fnorm = y, ry, statey, fy
-            else:
-                w = sla.cho_solve(cond.chol, d)
-                lam, state = pc.line_minimum(float((v - a) @ w), float(d @ w), r, s)
-                v, r = v + lam * d, r + lam * s
-                fnorm = self.fnorm(v - a + S @ pc.force(r))
-            seen.append(state.tobytes())
-            snorm = float(np.linalg.norm(d))
-            if snorm <= settings.rtol * unorm and self.step_test(v, d):
-                self.state = None
-                return history, v, snorm
-        self.state = None
-        return history, v, snorm

@@ -44,7 +44,7 @@ class DampedResult:
 
 def has_energy(problem: DisplacementProblem) -> bool:
     """Whether the level's F = 0 minimizes a convex energy: contact without the implicit memory term."""
-    return problem.contact is not None and problem.Fm is None
+    return problem.contact is not None and problem.split is not None
 
 
 class DampedFallback:
@@ -111,19 +111,20 @@ def damped_newton(problem: DisplacementProblem, ksp: PETSc.KSP, start: PETSc.Vec
             v.destroy()
 
 
-def _along(y: PETSc.Vec, lam: float, d: PETSc.Vec, x: PETSc.Vec, bcs, iterative: bool) -> None:
+def along(y: PETSc.Vec, lam: float, d: PETSc.Vec, x: PETSc.Vec, bcs, iterative: bool) -> None:
     """y = x + lam d, put on the Dirichlet values where an iterative solve leaves them off."""
     y.waxpy(lam, d, x)
     if iterative:
         fpetsc.set_bc(y, bcs)
 
 
-def _line_minimum(problem, x, d, y, F, slope: float, iterative: bool) -> float:
+def line_minimum(problem: DisplacementProblem, x: PETSc.Vec, d: PETSc.Vec, y: PETSc.Vec, F: PETSc.Vec,
+                 slope: float, iterative: bool) -> float:
     """The step length in (0, 1] that minimizes E(x + lam d): the root of phi'(lam) = F(x + lam d).d, which is
     nondecreasing (E is convex) and piecewise smooth; found by the Illinois variant of regula falsi. Uses y
     and F as work vectors."""
     def dphi(lam: float) -> float:
-        _along(y, lam, d, x, problem.bcs, iterative)
+        along(y, lam, d, x, problem.bcs, iterative)
         problem.evaluate(y, F)
         return F.dot(d)
 
@@ -181,15 +182,15 @@ def _iterate(problem, ksp, x, max_it, converged, iterative, F, d, y) -> DampedRe
             out.reason = R.DIVERGED_LINEAR_SOLVE
             return out
         slope = F.dot(d)  # phi'(0) for phi(lam) = E(x + lam d); < 0 for a descent direction
-        _along(y, 1.0, d, x, bcs, iterative)
+        along(y, 1.0, d, x, bcs, iterative)
         lam = 1.0
         changed = problem.update_jacobian(y)  # J at the full step (kept if the full step is taken)
         stale = stale or changed
         if changed and slope < 0.0:  # the active set changes along d: minimize E on the line
-            lam = _line_minimum(problem, x, d, y, F, slope, iterative)
+            lam = line_minimum(problem, x, d, y, F, slope, iterative)
             if lam < 1.0:
                 contact.forget()  # J was assembled at the full step: rebuild it at the new iterate
-            _along(y, lam, d, x, bcs, iterative)
+            along(y, lam, d, x, bcs, iterative)
         y.copy(x)
         # the convergence test gets the Newton step, not the damped one: a line search that stops a step at a
         # kink of E near its start (lam ~ 1e-6 with 1/mu ~ 1e10) moves x by less than rtol |x| while F is far

@@ -14,12 +14,13 @@ Newton's) followed by one of:
 - the full step, where its end has an active set not met before on this level, on the level's first
   FREE_STEPS iterations (a zone that closes from nothing would otherwise grow by a point or two per damped
   step) and later where it lowers ||F||;
-- otherwise the minimum of E on the line x + lam d, lam in (0, 1] (damped_newton._line_minimum).
+- otherwise the minimum of E on the line x + lam d, lam in (0, 1] (damped_newton.line_minimum).
 
 Full steps that change the active set go to distinct sets, so there are finitely many; between them E does not
 grow. So the iterates cannot cycle: no watch and no fallback are needed. The stopping test is plain Newton's
 (:class:`~newton.NewtonTest`, given the full Newton step |d|), so the level is solved to the same
-tolerance. Without an energy (the implicit memory term) the level is plain Newton's.
+tolerance. It requires an energy: without one (the implicit memory term) the registry builds plain Newton
+instead (methods.py).
 """
 
 from __future__ import annotations
@@ -28,58 +29,65 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from solver.config import SolverConfig
-from solver.physics.displacement import DisplacementProblem, SolveInfo
-from solver.solvers.damped_newton import DampedResult, _along, _line_minimum, has_energy
+from solver.errors import ConfigError
+from solver.physics.displacement import SolveInfo
+from solver.solvers.damped_newton import DampedResult, along, has_energy, line_minimum
 from solver.solvers.linear import REASONS_SNES
-from solver.solvers.newton import NewtonSolver
+from solver.solvers.method import DisplacementMethod
+from solver.solvers.newton import NewtonCore, NewtonTest
 
 FREE_STEPS = 2  # a level's first steps to a new active set are taken in full, whatever their residual
 
 
-class EnergyNewtonSolver(NewtonSolver):
-    """:class:`NewtonSolver`'s set-up (options under ``mech_``, the same KSP and test), each contact level
-    solved by Newton steps with an exact line search on the energy (see the module docstring)."""
+class EnergyNewtonSolver(DisplacementMethod):
+    """Each contact level solved by Newton steps with an exact line search on the energy (see the module
+    docstring), on :class:`NewtonCore`'s KSP (options under ``mech_``) and to plain Newton's test with the scene's
+    ``max_it``. Requires an energy (:func:`~damped_newton.has_energy`)."""
 
-    def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm) -> None:
-        super().__init__(problem, settings, comm)
-        self.energy = has_energy(problem)
-        self._work = [problem.u.vector.duplicate() for _ in range(4)] if self.energy else []
+    def __init__(self, core: NewtonCore) -> None:
+        problem = core.problem
+        if not has_energy(problem):
+            raise ConfigError(key="solver.method", value="newton_energy",
+                              allowed="needs a contact energy (no implicit memory term): methods.py builds newton")
+        self.core, self.problem = core, problem
+        self.test = NewtonTest(core.settings.rtol, core.settings.max_it, core.cycles, problem.contact)
+        self._work = [problem.u.vector.duplicate() for _ in range(4)]
         self._stale = False  # J was modified at a trial point since the last linear solve
+        self._seen: list[bytes] = []  # the active sets of the level's iterates
+        self._at_trial = False  # x is the last trial point, where J and the active set were assembled
         self.damped_steps = 0  # steps shorter than the Newton step, over the run
 
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
-        if not self.energy:
-            return super().solve(scale)
-        self.test.scale = scale
-        ksp = self.snes.getKSP()
+        core = self.core
+        self.test.start_level(scale)
+        ksp = core.ksp
         ksp.setOperators(self.problem.J, self.problem.J)
-        self.krylov_tolerance.apply(ksp, scale)
-        out = self._iterate(ksp)
+        core.krylov_tolerance.apply(ksp, scale)
+        out = self.iterate(ksp)
         self.problem.u.x.scatter_forward()
-        self.factorizations += out.factorizations
+        core.count_factorizations(out.factorizations)
         name = REASONS_SNES.get(out.reason, str(out.reason))
-        return self._finish(out, name, scale)
+        return self.finish(out, name, scale)
 
-    def _finish(self, out: DampedResult, name: str, scale: float) -> SolveInfo:
-        """The level's SolveInfo (or DisplacementSolveError), through plain Newton's outcome."""
-        self.fallback.krylov_iterations = out.krylov_iterations
-        return self._outcome(out.reason, name, out.history, out.iterations, scale, out.factorizations)
+    def finish(self, out: DampedResult, name: str, scale: float) -> SolveInfo:
+        """The level's SolveInfo (or DisplacementSolveError), through :meth:`NewtonCore.outcome`."""
+        return self.core.outcome(out.reason, name, out.history, out.iterations, scale, out.factorizations,
+                                 out.krylov_iterations)
 
-    def _iterate(self, ksp: PETSc.KSP) -> DampedResult:
+    def iterate(self, ksp: PETSc.KSP) -> DampedResult:
         """Newton steps with the exact line search from u (u ends holding the last iterate)."""
         R = PETSc.SNES.ConvergedReason
-        problem, iterative = self.problem, self.iterative
+        problem, iterative, core = self.problem, self.core.iterative, self.core
         x, F, d, y = self._work  # x: the iterate (u itself is overwritten at every trial point)
         problem.u.vector.copy(x)
         fpetsc.set_bc(x, problem.bcs)  # the level's Dirichlet values: every step keeps them (d = 0 there)
         problem.evaluate(x, F)
         out = DampedResult(R.ITERATING, 0, [F.norm()])
-        self._seen: list[bytes] = []
-        self._at_trial = False  # x is the last trial point, where J and the active set were assembled
+        self._seen = []
+        self._at_trial = False
         snorm = 0.0
-        for it in range(self.settings.max_it + 1):
+        for it in range(core.settings.max_it + 1):
             out.iterations = it
             out.reason = self.test(it, x.norm(), snorm, out.history[-1])
             if out.reason != R.ITERATING:
@@ -87,7 +95,7 @@ class EnergyNewtonSolver(NewtonSolver):
             # after a full step J is already x's (assembled at the trial point): not assembled again
             changed = False if self._at_trial else problem.update_jacobian(x)
             self._seen.append(problem.contact.fingerprint())  # x's active set
-            if changed or self._stale or self.factorizations + out.factorizations == 0:
+            if changed or self._stale or core.factorizations + out.factorizations == 0:
                 out.factorizations += 1  # J changed (or the run's first solve factors it)
             self._stale = False
             ksp.solve(F, d)
@@ -112,15 +120,15 @@ class EnergyNewtonSolver(NewtonSolver):
         problem = self.problem
         self._at_trial = False
         slope = F.dot(d)  # phi'(0) of phi(lam) = E(x + lam d); < 0: a descent direction
-        _along(y, 1.0, d, x, problem.bcs, self.iterative)
+        along(y, 1.0, d, x, problem.bcs, self.core.iterative)
         changed = problem.update_jacobian(y)  # the active set at the full step (J kept if it is taken)
         self._stale = self._stale or changed
         if changed and slope < 0.0 and not self._full_step_fits(y, F, fnorm):
-            lam = _line_minimum(problem, x, d, y, F, slope, self.iterative)
+            lam = line_minimum(problem, x, d, y, F, slope, self.core.iterative)
             if lam < 1.0:
                 self.damped_steps += 1
                 x.axpy(lam, d)
-                if self.iterative:
+                if self.core.iterative:
                     fpetsc.set_bc(x, problem.bcs)
                 return
         y.copy(x)

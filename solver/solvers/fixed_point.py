@@ -21,25 +21,27 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from solver.config import BoundaryConfig, SolverConfig
+from solver.config import BoundaryConfig
 from solver.errors import DisplacementSolveError
 from solver.mesh.geometry import Geometry
 from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.linear import make_ksp
+from solver.solvers.method import DisplacementMethod
+from solver.solvers.settings import LinearSettings, PointIterationSettings
 
 
-class ContactIteration:
+class ContactIteration(DisplacementMethod):
     """The loop both methods share: forces at the points -> right-hand side -> one factored solve -> residual."""
 
     name = ""
 
-    def __init__(self, problem: DisplacementProblem, points: ContactPoints, settings: SolverConfig,
-                 comm: MPI.Comm) -> None:
+    def __init__(self, problem: DisplacementProblem, points: ContactPoints, settings: PointIterationSettings,
+                 linear: LinearSettings, comm: MPI.Comm) -> None:
         self.problem, self.points, self.settings = problem, points, settings
         self.ksp = make_ksp(comm, self.matrix(), "mech_fp_",
-                            settings.petsc_options, settings.linear)
+                            linear.petsc_options, linear.kind)
         self._rhs = problem.r.duplicate()
         self._factored = False
 
@@ -58,6 +60,7 @@ class ContactIteration:
         """Update the iteration's own state from the new u."""
 
     def solve(self, scale: float) -> SolveInfo:
+        """Iterate the level to ||F|| <= rtol * scale; raise DisplacementSolveError naming how it failed."""
         problem, pts, x, rhs = self.problem, self.points, self.problem.u.vector, self._rhs
         u = problem.u
         tol = self.settings.rtol * scale
@@ -94,7 +97,7 @@ class ContactIteration:
             elif it >= self.settings.max_it:
                 reason = "DIVERGED_MAX_IT"
         ok = reason.startswith("CONVERGED")
-        problem.carried = ok
+        problem.level_converged() if ok else problem.forget_level()
         if not ok:
             raise DisplacementSolveError(self.name, reason, it, history, tol, linear_reason=linear_reason)
         factorizations = 0 if self._factored or it == 0 else 1  # the matrix is factored at its first solve
@@ -119,13 +122,13 @@ class PenaltyDualitySolver(ContactIteration):
 
     name = "penalty_duality"
 
-    def __init__(self, problem: DisplacementProblem, points: ContactPoints, settings: SolverConfig, comm: MPI.Comm,
-                 geo: Geometry, parts: tuple[BoundaryConfig, ...]) -> None:
+    def __init__(self, problem: DisplacementProblem, points: ContactPoints, settings: PointIterationSettings,
+                 linear: LinearSettings, comm: MPI.Comm, geo: Geometry, parts: tuple[BoundaryConfig, ...]) -> None:
         self.geo, self.parts = geo, parts
         self.omega = settings.penalty_duality_omega * points.inv_mu
         self.lam = 1.0 / (2.0 * self.omega)
         self.q = np.zeros_like(self.omega)
-        super().__init__(problem, points, settings, comm)
+        super().__init__(problem, points, settings, linear, comm)
 
     def matrix(self) -> PETSc.Mat:
         """K + omega N^T W N, assembled as the UFL penalty term on the contact facets."""

@@ -20,24 +20,13 @@ from petsc4py import PETSc
 from solver.config.solver import NEWTON_METHODS
 from solver.errors import ConfigError
 
-# 3-D scenes: what ``auto`` picks (choose_linear). Measured on 3-D Example 1 with OpenBLAS, one rank, every solver
-# alternated, wall and CPU time (scripts/auto_rule.py; benchmarks/results/auto_rule.md and auto_rule_107k/; issue 30):
-# at 10,125 dofs MUMPS is cheaper than the iterative path in both level 0 (its two factorizations, K and K + C) and
-# the steps; at 36,501 its level 0 is 1.2-1.7x dearer and its steps 2-2.5x cheaper, a break-even after 8-10 steps;
-# at 107,811 its level 0 is 6.8x (wall) / 2.2x (CPU) dearer and its steps 2.6x / 1.2x cheaper, a break-even after
-# 60 / 167 steps, past 3-D Example 1's 50. So MUMPS below AUTO_ITERATIVE_DOFS_3D dofs (60,000: between the two
-# measured sizes, near their geometric mean) for a run of AUTO_DIRECT_MIN_STEPS_3D steps or more, the iterative
-# path for shorter runs from 10,000 dofs (where level 0 decides) and for every run from AUTO_ITERATIVE_DOFS_3D on
-# (MUMPS's fill grows faster than the mesh: its level 0 grew 7.5x from 10,125 to 36,501 dofs, and its memory was
-# 2.2x the iterative path's at 107,811, benchmarks/results/scaling.md). The machine was loaded (load average 7 on
-# 2 cores): wall and CPU time are both given, and the rule holds for both. A run whose
-# active set moves pays a factorization (MUMPS) or a set-up (iterative) at each change: the steps then weigh less
-# and the rule counts only level 0's two. Before issue 30, measured on netlib's reference BLAS
-# (benchmarks/results/auto_3d/scaling.md), the iterative path was taken from 10,000 dofs for every run.
-# Checked on the later scaling run with GAMG as the iterative path's AMG (scaling.md, 2026-11-26 10:00, 10 steps a
-# case; docs/benchmarks/performance.md): MUMPS is faster from 11 / 21 / 74 / 182 steps at 10,125 / 36,501 / 107,811
-# / 311,469 dofs, for 1.2 / 2.0 / 3.4 / 5.2x the iterative path's peak memory. AUTO_DIRECT_MIN_STEPS_3D went from
-# 10 (the break-even at 36,501 dofs with ML) to 20 (21 with GAMG, 11 at 10,125).
+# 3-D scenes: what ``auto`` picks (choose_linear). MUMPS's level 0 (two factorizations, K and K + C) is dearer
+# than the iterative path's set-ups from about 10,000 dofs and its steps cheaper, with a break-even in steps that
+# grows with the mesh, while its fill (time and memory) grows faster than the mesh: so MUMPS below
+# AUTO_ITERATIVE_DOFS_3D dofs for a run of AUTO_DIRECT_MIN_STEPS_3D steps or more, the iterative path for shorter
+# runs from AUTO_SHORT_RUN_DOFS_3D dofs and for every run from AUTO_ITERATIVE_DOFS_3D on. A run whose active set
+# moves pays a factorization (MUMPS) or a set-up (iterative) at each change, so the rule counts only level 0's
+# two. The measurements: docs/benchmarks/performance.md, "The linear solver auto".
 AUTO_ITERATIVE_DOFS_3D = 60_000
 AUTO_SHORT_RUN_DOFS_3D = 10_000
 AUTO_DIRECT_MIN_STEPS_3D = 20
@@ -76,9 +65,9 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
     ``petsc``: PETSc's sequential Cholesky with nested dissection (one process only);
     ``redundant``: every rank holds the whole matrix and solves it with ``petsc``;
     ``mumps``: MUMPS's distributed Cholesky. ``auto`` picks ``petsc`` on one process,
-    ``redundant`` on up to 4 and ``mumps`` beyond. Measured here (n = 256, 2 ranks, see
-    benchmarks): a MUMPS triangular solve costs 27 ms against 14-18 ms for the sequential
-    one, so on a few ranks it is faster to solve redundantly and share the rest of the work.
+    ``redundant`` on up to 4 and ``mumps`` beyond: on a few ranks a MUMPS triangular solve costs more than the
+    sequential one, so solving redundantly and sharing the rest of the work is faster
+    (docs/benchmarks/performance.md).
     """
     if kind == "auto":
         kind = _auto_direct(comm)
@@ -92,8 +81,8 @@ def direct_options(comm: MPI.Comm, kind: str = "auto", symmetric: bool = True) -
         opts = {"ksp_type": "preonly", "pc_type": "redundant", "pc_redundant_number": str(comm.size)}
         opts.update({f"redundant_{k}": v for k, v in seq.items()})
         return opts
-    # MUMPS's workspace: its estimate + 50 % (ICNTL(14), default 20 %). On 2 ranks the damage matrix of 3-D
-    # Example 1 (n = 14) failed about one factorization in 15 with INFOG(1) = -9 (workspace too small) at 20 %
+    # MUMPS's workspace: its estimate + 50 % (ICNTL(14), default 20 %): at 20 % a factorization can fail with
+    # INFOG(1) = -9, workspace too small (docs/benchmarks/performance.md, "MUMPS's workspace")
     return {"ksp_type": "preonly", "pc_type": factor, "pc_factor_mat_solver_type": "mumps", "mat_mumps_icntl_14": "50"}
 
 
@@ -124,19 +113,13 @@ class KrylovTolerance:
             ksp.setTolerances(**self.tolerances(scale))
 
 
-# The displacement's AMG: GAMG's smoothed aggregation (PETSc's own, the plain elasticity solve's), set up anew
-# whenever J changes. GAMG keeps the interpolation of its first set-up by default (pc_gamg_reuse_interpolation):
-# in 3-D Example 1 that was K's, level 0's first solve before any contact, and with the contact term added its
-# Krylov iterations grew with the penalty and the mesh (92 per solve at 107,811 dofs and mu = 1e-10, where ML took
-# 16; benchmarks/results/amg_3d.md and the first run of krylov_contact_amg.md measured GAMG so, and this file chose
-# Trilinos ML from them). Set up anew, over 10 steps at mu = 1e-10 (python -m studies.krylov_contact --amg gamg ml
-# gamg-reuse, benchmarks/results/krylov_contact_amg.md, issue 30): 11.9 / 13.8 / 14.8 / 15.8 Krylov iterations per
-# solve at 10,125 / 36,501 / 107,811 / 311,469 dofs against ML's 9.9 / 11.4 / 12.9 / 14.4, ML's step taking 0.96 /
-# 0.86 / 1.13 / 1.11 of GAMG's time and its peak 1.10 / 1.23 / 1.34 / 1.42 of GAMG's (kept: 41.7 / 63.7 / 80.0 /
-# 100.9 iterations). Also in PETSc builds without ML. ML stays one option away (solver.petsc_options.mech_pc_type
-# = "ml"): its MIS aggregation is among the defaults for that. With ML's default (uncoupled) aggregation the ninth
-# 3-D iterative model built in one process crashed (SIGSEGV in ML_memory_alloc from ML_Aggregate_CoarsenUncoupled;
-# Debian's PETSc 3.18, Trilinos 13.2); MIS ran 24 in a row (tests/solvers/test_ml_many_models.py).
+# The displacement's AMG: GAMG's smoothed aggregation (PETSc's own), set up anew whenever J changes
+# (pc_gamg_reuse_interpolation = false): an interpolation kept from the first set-up, K's before any contact, does
+# not see the contact penalty 1/mu that J has from then on, and the Krylov iterations then grow with the penalty
+# and the mesh. Trilinos ML stays one option away (solver.petsc_options.mech_pc_type = "ml"), with MIS aggregation
+# among the defaults: its default (uncoupled) aggregation crashed in ML's allocator after some models built in one
+# process (tests/solvers/test_ml_many_models.py). Measurements: docs/benchmarks/performance.md, "Krylov
+# iterations and the contact stiffness".
 SMOOTHER = {"mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi", "mg_levels_esteig_ksp_type": "cg"}
 ML_SAFE = {"pc_ml_CoarsenScheme": "MIS"}
 AMG = {
@@ -193,16 +176,16 @@ def rigid_body_modes(V: fem.FunctionSpace, normals: np.ndarray | None = None) ->
     ``normals`` (nodes, d; unit rows on the contact boundary, zero elsewhere): the rigid motions' normal component
     is taken out at those nodes, v <- v - (v . n) n. The contact penalty 1/mu (1e10) makes u . n there nearly a
     constraint, and a rigid motion that moves Gamma_C along its normal is no near-nullspace vector of J: with it
-    the Krylov iterations per solve grew with the mesh (31 at 107,811 dofs against the plain solve's 19,
-    benchmarks/results/krylov_contact.md); without it they stay at the plain solve's. Issue 30."""
+    the Krylov iterations per solve grow with the mesh; without it they stay at the plain solve's
+    (docs/benchmarks/performance.md)."""
 
     imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
     dim = V.mesh.geometry.dim
     nmodes = 3 if dim == 2 else 6
     basis = [la.create_petsc_vector(imap, bs) for _ in range(nmodes)]
     # one row per node, ghosts included (like the local form, whose dof k * bs + i is component i of node k): filled
-    # node by node, without the cell-by-cell index arrays of the sub-spaces' dofmaps (4 per cell per component, 30 MB
-    # of transients at 311,469 dofs in 3-D)
+    # node by node, without the cell-by-cell index arrays of the sub-spaces' dofmaps (their transients grow with
+    # the cells)
     x = V.tabulate_dof_coordinates()
     with ExitStack() as stack:
         nodes = [np.asarray(stack.enter_context(b.localForm())).reshape(-1, bs) for b in basis]
@@ -353,8 +336,8 @@ def make_ksp(comm: MPI.Comm, A: PETSc.Mat, prefix: str, user: tuple[tuple[str, s
         ksp.setInitialGuessNonzero(True)  # x holds the last solution: the previous level's field
     if defaults.get("pc_factor_mat_solver_type") == "mumps":
         ksp.setUp()  # MUMPS reads its mat_mumps_* options when it factors: factor while they are set
-    # the defaults are gone before the first solve, as they always were (a redundant factorization's inner
-    # solver, set up then, takes PETSc's own defaults): kept so that the arithmetic does not change
+    # the defaults are removed before the first solve: a redundant factorization's inner solver, set up then,
+    # takes PETSc's own defaults (the arithmetic the results are checked against)
     own.remove(defaults_only=True)
     return ksp
 

@@ -10,7 +10,8 @@ is linear and SNES runs as a single KSP solve.
 The parts: :class:`NewtonTest` (when to stop), :class:`~cycle_watch.ActiveSetCycleWatch` (a revisited active
 set), :class:`~damped_newton.DampedFallback` (a failed level handed to damped Newton),
 :class:`~linear.KrylovTolerance` (how far a Newton step's Krylov solve goes), :func:`make_snes` (the wiring);
-:class:`NewtonSolver` runs a level through them.
+:class:`NewtonCore` is what every Newton-type method shares on one problem (the SNES, its KSP, the Jacobian
+callbacks, the counters, a level's outcome); :class:`NewtonSolver` runs a level through them.
 """
 
 from __future__ import annotations
@@ -22,12 +23,11 @@ from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from solver.config import SolverConfig
 from solver.errors import DisplacementSolveError
 from solver.physics.contact import ContactTerm
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.solvers.cycle_watch import CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
-from solver.solvers.damped_newton import FALLBACK_IT_FACTOR, DampedFallback, has_energy  # noqa: F401 (config's docs)
+from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
     REASONS_SNES,
     KrylovTolerance,
@@ -36,15 +36,12 @@ from solver.solvers.linear import (
     linear_options,
     rigid_body_modes,
 )
-
-# the near-nullspace of the iterative path without the rigid motions' normal component on Gamma_C (False: the plain
-# rigid motions; studies/krylov_contact.py compares the two)
-CONTACT_NEAR_NULLSPACE = True
-
+from solver.solvers.method import DisplacementMethod
+from solver.solvers.settings import LinearSettings, NewtonSettings
 
 # a node of Gamma_C holds u . n (its normal leaves the near-nullspace) where the contact's stiffness (1/mu) int phi ds
-# is this many times K's diagonal there: 3-D Example 1 has 5e5 at mu = 1e-10 (n = 32), 0.05 at mu = 1e-3, where taking
-# the normal out cost level 0 iterations (16.7 -> 29 at 36,501 dofs, benchmarks/results/krylov_contact.md)
+# is this many times K's diagonal there; where the contact is soft, taking the normal out costs Krylov iterations
+# (docs/benchmarks/performance.md, "Krylov iterations and the contact stiffness")
 STIFF_CONTACT_RATIO = 100.0
 
 
@@ -73,13 +70,17 @@ class NewtonTest:
 
     With 1/mu ~ 1e10 the residual has a round-off floor ~ eps ||J|| ||u|| that can exceed rtol * scale; a
     correction below rtol ||u|| then means the active set is settled and the direct solve exact. While the
-    cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE): on the
-    hard scene of tests/solvers/test_damped_newton.py the failing level stops after 9 of its 25 iterations.
+    cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE) instead
+    of running on to max_it.
     """
 
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:
         self.rtol, self.max_it, self.cycles, self.contact = rtol, max_it, cycles, contact
-        self.scale = 1.0  # the level's force scale
+        self.scale = 1.0  # the level's force scale (:meth:`start_level`)
+
+    def start_level(self, scale: float) -> None:
+        """A new level, whose force scale is ``scale`` (||F|| <= rtol * scale)."""
+        self.scale = scale
 
     def __call__(self, it: int, xnorm: float, snorm: float, fnorm: float) -> int:
         """The SNES reason after iteration ``it`` (ITERATING to go on)."""
@@ -98,9 +99,11 @@ class NewtonTest:
         return R.ITERATING
 
 
-def newton_options(comm: MPI.Comm, problem: DisplacementProblem, settings: SolverConfig) -> dict[str, str]:
-    """The SNES's default options (without prefix): the linear solver's, and Newton's."""
-    options = linear_options(comm, settings.linear, problem.symmetric, settings.rtol, elasticity=True)
+def newton_options(comm: MPI.Comm, problem: DisplacementProblem, linear: LinearSettings,
+                   rtol: float) -> dict[str, str]:
+    """The SNES's default options (without prefix): the linear solver's (its Krylov tolerance from Newton's
+    ``rtol``), and Newton's."""
+    options = linear_options(comm, linear.kind, problem.symmetric, rtol, elasticity=True)
     options.update({
         "snes_type": "newtonls" if problem.nonlinear else "ksponly",
         "snes_linesearch_type": "basic",
@@ -111,7 +114,7 @@ def newton_options(comm: MPI.Comm, problem: DisplacementProblem, settings: Solve
     return options
 
 
-def make_snes(comm: MPI.Comm, prefix: str, problem: DisplacementProblem, settings: SolverConfig,
+def make_snes(comm: MPI.Comm, prefix: str, problem: DisplacementProblem, settings: NewtonSettings,
               residual: Callable, jacobian: Callable, test: NewtonTest) -> PETSc.SNES:
     """A SNES on ``problem`` with the callbacks and the test, reading its options under ``prefix`` (already in
     PETSc's database)."""
@@ -126,40 +129,49 @@ def make_snes(comm: MPI.Comm, prefix: str, problem: DisplacementProblem, setting
     return snes
 
 
-class NewtonSolver:
-    """Semismooth Newton (SNES, the scene's options under ``mech_``) on a :class:`DisplacementProblem`, one
-    level per :meth:`solve`; a level plain Newton fails goes to the damped fallback where it is allowed."""
+class NewtonCore:
+    """What the Newton-type methods on one :class:`DisplacementProblem` share: the SNES (the scene's options under
+    ``mech_``) with its KSP on J, the callbacks that count factorizations and record the level's first active set,
+    the cycle watch, the Krylov tolerance policy, the counters of the run, and :meth:`outcome` (a level's
+    SolveInfo or DisplacementSolveError). ``test`` is the SNES's (plain Newton's) convergence test."""
 
     prefix = "mech_"  # the scene's name for this solver's options
 
-    def __init__(self, problem: DisplacementProblem, settings: SolverConfig, comm: MPI.Comm) -> None:
+    def __init__(self, problem: DisplacementProblem, settings: NewtonSettings, linear: LinearSettings,
+                 comm: MPI.Comm, test_max_it: int | None = None) -> None:
         self.problem, self.settings = problem, settings
         self.factorizations = 0  # factorizations (direct) or preconditioner set-ups (iterative)
         self.krylov_iterations = 0  # summed over the run (iterative solves)
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
-        self.iterative = settings.linear == "iterative"
+        self.iterative = linear.iterative
         contact = problem.contact
         self.cycles = ActiveSetCycleWatch(contact.comm if contact else comm,
                                           has_energy(problem) and contact.piecewise_linear)
-        self.fallback = DampedFallback(problem, settings.newton_fallback, settings.max_it)
-        self.krylov_tolerance = KrylovTolerance(settings.rtol, self.iterative, self.prefix, settings.petsc_options)
-        self.test = NewtonTest(settings.rtol, settings.max_it, self.cycles, contact)
+        self.krylov_tolerance = KrylovTolerance(settings.rtol, self.iterative, self.prefix, linear.petsc_options)
+        self.test = NewtonTest(settings.rtol, settings.max_it if test_max_it is None else test_max_it, self.cycles,
+                               contact)
+        self._nullspace: PETSc.NullSpace | None = None
         if self.iterative:
             # CG + AMG on J with the rigid motions as near-nullspace (their normal component taken out on Gamma_C,
             # where the contact penalty holds u . n: linear.rigid_body_modes)
-            normals = contact_normals(problem) if contact is not None and CONTACT_NEAR_NULLSPACE else None
+            near = contact is not None and settings.contact_near_nullspace
+            normals = contact_normals(problem) if near else None
             self._nullspace = rigid_body_modes(problem.u.function_space, normals)
             problem.J.setNearNullSpace(self._nullspace)
-        defaults = newton_options(comm, problem, settings)
-        check_options(comm, self.prefix, defaults, settings.petsc_options, snes=True)
-        self.options = OwnOptions(self, self.prefix, defaults, settings.petsc_options)
+        defaults = newton_options(comm, problem, linear, settings.rtol)
+        check_options(comm, self.prefix, defaults, linear.petsc_options, snes=True)
+        self.options = OwnOptions(self, self.prefix, defaults, linear.petsc_options)
         self.snes = make_snes(comm, self.options.prefix, problem, settings, self._residual, self._jacobian, self.test)
 
+    def count_factorizations(self, n: int) -> None:
+        """Count ``n`` factorizations (set-ups) made by a method's own iteration on the core's KSP or beside it."""
+        self.factorizations += n
+
     @property
-    def fallbacks(self) -> int:
-        """Levels solved by the damped fallback."""
-        return self.fallback.levels
+    def ksp(self) -> PETSc.KSP:
+        """The KSP on J (every Newton-type method's linear solver)."""
+        return self.snes.getKSP()
 
     def _residual(self, snes: PETSc.SNES, x: PETSc.Vec, F: PETSc.Vec) -> None:
         if self._initial is not None:  # the first evaluation, at u_{n-1}: already known
@@ -182,7 +194,12 @@ class NewtonSolver:
         if self.cycles.watching and not self.cycles.started:  # the level's first iterate
             self.cycles.first(self.problem.contact.fingerprint())
 
-    def _plain_newton(self) -> tuple[int, np.ndarray, int]:
+    def carry_first_residual(self) -> None:
+        """The level's first residual, F(u_{n-1}), from the carried one: the SNES's first evaluation."""
+        self.problem.first_residual(self._F0)
+        self._initial = self._F0
+
+    def plain_newton(self) -> tuple[int, np.ndarray, int]:
         """SNES on the level from u; its reason, residual history and iterations."""
         u = self.problem.u
         self.cycles.start()
@@ -195,26 +212,10 @@ class NewtonSolver:
         history, _ = self.snes.getConvergenceHistory()
         return self.snes.getConvergedReason(), history, self.snes.getIterationNumber()
 
-    def solve(self, scale: float) -> SolveInfo:
-        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
-        self.test.scale = scale
-        self.krylov_tolerance.apply(self.snes.getKSP(), scale)
-        self.problem.first_residual(self._F0)
-        self._initial = self._F0
-        f0 = self.factorizations
-        self.fallback.remember_start()
-        reason, history, its = self._plain_newton()
-        cycled = self.cycles.cycled
-        if reason < 0 and self.fallback.allowed:
-            cycled = False  # the fallback's own reason names its outcome
-            reason, history, its, factorizations = self.fallback.take_over(
-                self.snes.getKSP(), self.test, list(history[:its + 1]), its, self.iterative)
-            self.factorizations += factorizations
-        name = CYCLE if (cycled and reason < 0) else REASONS_SNES.get(reason, str(reason))
-        return self._outcome(reason, name, history, its, scale, self.factorizations - f0)
-
-    def _outcome(self, reason: int, name: str, history, its: int, scale: float, factorizations: int) -> SolveInfo:
-        """The level's SolveInfo, or the DisplacementSolveError naming why it failed."""
+    def outcome(self, reason: int, name: str, history, its: int, scale: float, factorizations: int,
+                krylov: int) -> SolveInfo:
+        """The level's SolveInfo, or the DisplacementSolveError naming why it failed. ``krylov``: the Krylov
+        iterations of the level's solves outside the SNES (iterative solver only)."""
         problem, u = self.problem, self.problem.u
         if problem.nonlinear:
             residual = float(history[its]) if len(history) > its else float("nan")
@@ -222,15 +223,48 @@ class NewtonSolver:
             problem.evaluate(u.vector, problem.r)
             residual = problem.r.norm()
         ksp_reason = self.snes.getKSP().getConvergedReason()
-        krylov = (self.snes.getLinearSolveIterations() + self.fallback.krylov_iterations) if self.iterative else 0
+        krylov = (self.snes.getLinearSolveIterations() + krylov) if self.iterative else 0
         self.krylov_iterations += krylov
         tol = self.settings.rtol * scale
         ok = reason > 0 and ksp_reason >= 0 and np.isfinite(residual)
         if ok and not problem.nonlinear:
             # one exact (direct) solve of a linear problem: the residual must meet the tolerance
             ok = residual <= tol
-        problem.carried = ok
+        problem.level_converged() if ok else problem.forget_level()
         if not ok:
             raise DisplacementSolveError("SNES", name, its, list(history), tol, linear_reason=ksp_reason)
         return SolveInfo(max(its, 1), factorizations, residual, name, linear_solves=max(its, 1),
                          krylov_iterations=krylov)
+
+
+class NewtonSolver(DisplacementMethod):
+    """Semismooth Newton (:class:`NewtonCore`'s SNES) on a :class:`DisplacementProblem`, one level per
+    :meth:`solve`; a level plain Newton fails goes to the damped fallback where ``fallback`` allows it."""
+
+    def __init__(self, core: NewtonCore, fallback: bool) -> None:
+        self.core, self.problem = core, core.problem
+        self.fallback = DampedFallback(core.problem, fallback, core.settings.max_it)
+
+    @property
+    def fallbacks(self) -> int:
+        """Levels solved by the damped fallback."""
+        return self.fallback.levels
+
+    def solve(self, scale: float) -> SolveInfo:
+        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
+        core = self.core
+        core.test.start_level(scale)
+        core.krylov_tolerance.apply(core.ksp, scale)
+        core.carry_first_residual()
+        f0 = core.factorizations
+        self.fallback.remember_start()
+        reason, history, its = core.plain_newton()
+        cycled = core.cycles.cycled
+        if reason < 0 and self.fallback.allowed:
+            cycled = False  # the fallback's own reason names its outcome
+            reason, history, its, factorizations = self.fallback.take_over(
+                core.ksp, core.test, list(history[:its + 1]), its, core.iterative)
+            core.count_factorizations(factorizations)
+        name = CYCLE if (cycled and reason < 0) else REASONS_SNES.get(reason, str(reason))
+        return core.outcome(reason, name, history, its, scale, core.factorizations - f0,
+                            self.fallback.krylov_iterations)

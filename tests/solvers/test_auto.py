@@ -52,7 +52,7 @@ def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
     with fewer factorizations, and K factored, not the K + C Newton leaves in K's storage."""
     model, rows = _run(comm, "auto", CYCLING)
     solver = model.mech.solver
-    assert solver.switched and solver.fallbacks == 0 and solver.reduced_iterations > 0
+    assert solver.switched and solver.fallbacks == 0 and solver.takeover.reduced_iterations > 0
     ref_model, ref = _run(comm, "newton", CYCLING)
     assert ref_model.mech.solver.fallbacks >= 1
     at = solver.switched_at  # the first level Newton does not solve in NEWTON_ITERATIONS (t = 0.3, 10 here)
@@ -66,7 +66,7 @@ def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
     # the Schur complement on the contact dofs is K's, as newton_condensed's own (Newton leaves K + C in K's
     # storage; factored as it was, the condensed levels took 676 iterations on hard.toml P2 n = 16, 160 alone)
     cond_model, _ = _run(comm, "newton_condensed", CYCLING)
-    S, S_ref = solver.cond.S, cond_model.mech.solver.cond.S
+    S, S_ref = solver.takeover.cond.S, cond_model.mech.solver.cond.S
     if comm.size == 1:
         assert np.array_equal(S, S_ref)
     else:  # the contact dofs in the order of each build's partition

@@ -12,7 +12,9 @@ from petsc4py import PETSc
 from solver.config import load
 from solver.io.results import run
 from solver.run.model import build_model
-from solver.solvers.condensed import CondensedNewtonSolver, Reduced
+from solver.solvers.condensed import CondensedNewtonSolver
+from solver.solvers.energy_newton import EnergyNewtonSolver
+from solver.solvers.reduced import Reduced
 
 # test_energy_newton.py's scene: hard.toml with P2, where at t = 0.45 plain Newton cycles and needs its fallback
 CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
@@ -29,7 +31,7 @@ def test_the_same_levels_as_newton_with_one_factorization(comm):
     of the active set)."""
     model, rows = _run(comm, "newton_condensed")
     solver = model.mech.solver
-    assert isinstance(solver, CondensedNewtonSolver) and solver.on and solver.fallbacks == 0
+    assert isinstance(solver, CondensedNewtonSolver) and solver.fallbacks == 0
     assert sum(r["factorizations"] for r in rows) == 1
     assert solver.reduced_iterations > 0  # the moving levels were iterated on the contact dofs
     ref_model, ref = _run(comm, "newton")
@@ -66,8 +68,10 @@ def test_where_it_does_not_apply_it_is_newton_energy(comm, extra):
     """An iterative linear solver (no factorization of K to reuse) or the implicit memory term (no energy):
     newton_energy's levels, step for step."""
     model, rows = _run(comm, "newton_condensed", [*extra, "time.T=0.1"])
-    assert not model.mech.solver.on
-    _, ref = _run(comm, "newton_energy", [*extra, "time.T=0.1"])
+    ref_model, ref = _run(comm, "newton_energy", [*extra, "time.T=0.1"])
+    # chosen at build time, the registry's instead: newton_energy's method (itself plain Newton without energy)
+    assert type(model.mech.solver) is type(ref_model.mech.solver)
+    assert isinstance(model.mech.solver, EnergyNewtonSolver) == (extra == ["solver.linear='iterative'"])
     assert [r["newton_iterations"] for r in rows] == [r["newton_iterations"] for r in ref]
     rel = 1e-12 if comm.size == 1 else 1e-8  # two builds on 2 ranks may partition differently
     assert [r["contact_force"] for r in rows] == pytest.approx([r["contact_force"] for r in ref], rel=rel)
@@ -87,7 +91,7 @@ def test_the_points_are_the_forms(comm):
     model, _ = _hard_p2(comm, ["time.T=0.3"])
     solver = model.mech.solver
     assert solver.points is not None
-    forms, pc = Reduced(solver, 1.0), solver.points
+    forms, pc = Reduced(solver.cond, solver.problem, solver.reduced_work, solver.core.settings, 1.0), solver.points
     a, S = solver.cond.u0_B, solver.cond.S
     rng = np.random.default_rng(comm.size)
     v0 = solver.dofs.gather(model.u.vector.array_r[solver.dofs.local])

@@ -36,13 +36,13 @@ def test_without_cycle_detection_the_level_runs_to_max_it(comm, monkeypatch):
     """The cycle is real: plain Newton left to run does not converge on that level."""
     from solver.solvers import newton
 
-    original = newton.NewtonSolver.__init__
+    original = newton.NewtonCore.__init__
 
     def blind(self, *a, **k):
         original(self, *a, **k)
         self.cycles.enabled = False
 
-    monkeypatch.setattr(newton.NewtonSolver, "__init__", blind)
+    monkeypatch.setattr(newton.NewtonCore, "__init__", blind)
     with pytest.raises(DisplacementSolveError) as err:
         _run(comm, ["solver.newton_fallback=false"])
     assert err.value.reason == "DIVERGED_MAX_IT" and err.value.step == 9

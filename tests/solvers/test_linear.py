@@ -222,7 +222,7 @@ def test_auto_resolves_on_the_mesh_and_the_scene_keeps_its_value(comm, monkeypat
     monkeypatch.setattr(solver.solvers.linear, "AUTO_ITERATIVE_DOFS_3D", 100)
     cfg = _small_3d("auto")
     model = build_model(cfg, comm)
-    assert model.linear == "iterative" and model.mech.solver.iterative and model.damage.iterative
+    assert model.linear == "iterative" and model.mech.solver.core.iterative and model.damage.iterative
     assert cfg.solver.linear == "auto"  # config.toml and the checkpoint's scene hash see the scene's own value
 
 
@@ -259,12 +259,12 @@ def test_multigrid_level_options_reach_the_preconditioner(comm):
     model = build_model(_small_3d("iterative", ("solver.petsc_options.mech_pc_type='gamg'",
                                                 "solver.petsc_options.mech_mg_levels_ksp_max_it=3")), comm)
     Stepper(model).step(0)
-    pc = model.mech.solver.snes.getKSP().getPC()
+    pc = model.mech.solver.core.ksp.getPC()
     assert pc.getType() == "gamg"
     smoother = pc.getMGSmoother(pc.getMGLevels() - 1)
     assert smoother.getType() == "chebyshev" and smoother.getTolerances()[3] == 3  # default type, scene's max_it
     # they stay for the solver's life under its own prefix, and nothing is left under the scene's mech_
-    own = model.mech.solver.options.prefix
+    own = model.mech.solver.core.options.prefix
     assert PETSc.Options()[f"{own}mg_levels_ksp_max_it"] == "3"
     assert not PETSc.Options().hasName("mech_mg_levels_ksp_max_it")
 
@@ -277,7 +277,7 @@ def test_mumps_reads_its_workspace_option_in_both_solvers(comm):
 
     model = build_model(_small_3d("mumps"), comm)
     Stepper(model).step(0)
-    for ksp in (model.damage.ksp, model.mech.solver.snes.getKSP()):
+    for ksp in (model.damage.ksp, model.mech.solver.core.ksp):
         assert ksp.getPC().getFactorMatrix().getMumpsIcntl(14) == 50
 
 
@@ -295,7 +295,7 @@ def test_gamg_builds_its_hierarchy_anew_when_the_contact_enters(comm):
 
     model = build_model(scene(), comm)
     rows = run(model, None)
-    pc = model.mech.solver.snes.getKSP().getPC()
+    pc = model.mech.solver.core.ksp.getPC()
     assert pc.getType() == "gamg" and rows[0]["factorizations"] == 2  # K, then K + C: two set-ups at level 0
     anew = sum(r["krylov_iterations"] for r in rows[1:])
     assert anew <= 17 * sum(r["linear_solves"] for r in rows[1:])
@@ -303,14 +303,12 @@ def test_gamg_builds_its_hierarchy_anew_when_the_contact_enters(comm):
     assert sum(r["krylov_iterations"] for r in reused[1:]) > 2 * anew
 
 
-def test_gamg_takes_its_smoothers_bounds_from_their_own_estimate(comm, monkeypatch):
+def test_gamg_takes_its_smoothers_bounds_from_their_own_estimate(comm):
     """With the smoothed aggregation's eigenvalue estimate as the Chebyshev bounds (GAMG's default) the
     preconditioner went indefinite on 3-D Example 1 at n = 14 with the plain rigid motions as near-nullspace; with
     the smoothers' own CG estimate (the solver's default) it converges."""
     from solver.io.results import run
     from solver.run.model import build_model
-    from solver.solvers import newton
 
-    monkeypatch.setattr(newton, "CONTACT_NEAR_NULLSPACE", False)
-    rows = run(build_model(_small_3d("iterative", n=14, k=0.02, T=0.04), comm), None)
+    rows = run(build_model(_small_3d("iterative", n=14, k=0.02, T=0.04), comm, contact_near_nullspace=False), None)
     assert rows[-1]["krylov_iterations"] <= 30

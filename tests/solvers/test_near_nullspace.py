@@ -3,6 +3,7 @@ without their normal component on Gamma_C, where the contact penalty 1/mu holds 
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from solver.config import load
 from solver.run.model import build_model
@@ -31,7 +32,7 @@ def test_near_nullspace_has_no_normal_component_on_gamma_c_and_keeps_the_rest(co
     """Every vector of the solver's near-nullspace is zero along the normal at Gamma_C's nodes; the six vectors are
     orthonormal, and the tangential motions (translations along x and y) are still in their span."""
     model = _model(comm)
-    ksp = model.mech.solver.snes.getKSP()
+    ksp = model.mech.solver.core.ksp
     J = ksp.getOperators()[0]
     basis = J.getNearNullSpace().getVecs()
     assert len(basis) == 6
@@ -48,6 +49,20 @@ def test_near_nullspace_has_no_normal_component_on_gamma_c_and_keeps_the_rest(co
         t.normalize()
         projected = sum(t.dot(b) ** 2 for b in basis)
         assert projected == pytest.approx(1.0, abs=1e-12)
+
+
+def test_without_the_contact_near_nullspace_the_rigid_motions_move_gamma_c_along_its_normal(comm):
+    """contact_near_nullspace = False (a study's option, no global): the plain rigid motions, among them the
+    translation along the normal of Gamma_C."""
+    model = build_model(_model(comm).cfg, comm, contact_near_nullspace=False)
+    assert not model.mech.settings.newton.contact_near_nullspace
+    basis = model.mech.solver.core.ksp.getOperators()[0].getNearNullSpace().getVecs()
+    z = model.u.function_space.tabulate_dof_coordinates()[:, 2]
+    owned = model.u.function_space.dofmap.index_map.size_local
+    bottom = np.flatnonzero(np.isclose(z[:owned], 0.0))
+    normal = comm.allreduce(max(np.abs(b.array_r.reshape(-1, 3)[bottom, 2]).max(initial=0.0) for b in basis),
+                            op=MPI.MAX)
+    assert normal > 1e-3
 
 
 @pytest.mark.serial

@@ -62,7 +62,7 @@ def test_a_set_is_met_again_only_when_it_is_on_every_rank(comm):
 
 def _test(cycles=None, contact=None):
     test = NewtonTest(1e-6, 5, cycles or ActiveSetCycleWatch(MPI.COMM_SELF, enabled=False), contact)
-    test.scale = 10.0
+    test.start_level(10.0)
     return test
 
 

@@ -1,0 +1,74 @@
+"""The solver settings each part uses, made once from the scene's ``[solver]`` when the model is built.
+
+``SolverConfig`` is the scene's table as written (``linear = "auto"`` stays "auto" there: the restart's hash reads
+it); :class:`MethodSettings` holds what the methods read, with the linear solver already resolved
+(linear.choose_linear). Each part gets its own small object: Newton's test and iteration limit
+(:class:`NewtonSettings`), the linear solver (:class:`LinearSettings`), the fixed-point iterations
+(:class:`PointIterationSettings`). The Newton tolerance ``rtol`` is read from the scene once, here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from solver.config import SolverConfig
+
+
+@dataclass(frozen=True)
+class LinearSettings:
+    """The linear solver of the displacement: ``kind`` resolved (petsc | redundant | mumps | iterative), and the
+    scene's PETSc options (full names, e.g. ``mech_ksp_type``)."""
+
+    kind: str
+    petsc_options: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def iterative(self) -> bool:
+        return self.kind == "iterative"
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Newton's test and limits: ||F|| <= rtol * scale or a step below rtol ||u|| (newton.NewtonTest), at most
+    ``max_it`` iterations; ``fallback``: a failed level may go to the damped fallback (``solver.newton_fallback``);
+    ``contact_near_nullspace``: the iterative path's near-nullspace without the rigid motions' normal component on
+    Gamma_C (False: the plain rigid motions; newton.contact_normals)."""
+
+    rtol: float = 1e-10
+    max_it: int = 25
+    fallback: bool = True
+    contact_near_nullspace: bool = True
+
+
+@dataclass(frozen=True)
+class PointIterationSettings:
+    """The fixed-point methods' tolerance (||F|| <= rtol * scale) and iteration limit, penalty-duality's omega
+    factor (omega = value / mu) and the contact quadrature degree of its penalty matrix."""
+
+    rtol: float = 1e-10
+    max_it: int = 25
+    penalty_duality_omega: float = 0.5
+    contact_quadrature_degree: int = 1
+
+
+@dataclass(frozen=True)
+class MethodSettings:
+    """What the displacement method is built from: its name (``solver.method``) and each part's settings."""
+
+    method: str
+    linear: LinearSettings
+    newton: NewtonSettings
+    points: PointIterationSettings
+    contact_quadrature_degree: int
+
+    @classmethod
+    def from_config(cls, cfg: SolverConfig, linear: str, contact_near_nullspace: bool = True) -> MethodSettings:
+        """The settings of a scene's ``[solver]`` with ``linear``, the linear solver its ``linear`` resolves to."""
+        return cls(
+            method=cfg.method,
+            linear=LinearSettings(linear, cfg.petsc_options),
+            newton=NewtonSettings(cfg.rtol, cfg.max_it, cfg.newton_fallback, contact_near_nullspace),
+            points=PointIterationSettings(cfg.rtol, cfg.max_it, cfg.penalty_duality_omega,
+                                          cfg.contact_quadrature_degree),
+            contact_quadrature_degree=cfg.contact_quadrature_degree,
+        )
