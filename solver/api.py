@@ -21,9 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from mpi4py import MPI
 
 from solver.config import Config, from_dict, load
 from solver.io.layout import API, ResultsDir, timeseries_columns
+from solver.io.xdmf import DolfinxRows, dolfinx_layout
+from solver.post.results import read_csv
+from solver.post.results import read_results as read_dir
 
 __all__ = ["Config", "Results", "load", "read", "run", "scene"]
 
@@ -77,8 +81,6 @@ def run(cfg: Config, output: str | Path | None = None, overwrite: bool = False, 
     chooses mesh, degree and step first (the same plan and results as the CLI; plan.json and mesh.xdmf with
     ``output``). ``on_step(row)``: called after each level (a progress bar). ``comm``: default MPI.COMM_WORLD.
     """
-    from mpi4py import MPI
-
     from solver.io.launch import launch
     from solver.io.results import run as run_model
 
@@ -95,9 +97,6 @@ def run(cfg: Config, output: str | Path | None = None, overwrite: bool = False, 
 
 def read(directory: str | Path) -> Results:
     """The results a run wrote to ``directory`` (timeseries.csv and the last level of solution.xdmf)."""
-    from solver.post.results import read_csv
-    from solver.post.results import read_results as read_dir
-
     directory = Path(directory)
     rows = read_csv(ResultsDir(directory).timeseries)
     series = {c: np.array([r[c] for r in rows]) for c in rows[0]} if rows else {}
@@ -115,8 +114,6 @@ def read(directory: str | Path) -> Results:
 def final_fields(model: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The model's displacement and damage at the mesh nodes (P1 values; higher degrees interpolated to P1, as the
     writer does), gathered in input order on every rank: (points, {name: values})."""
-    from solver.io.xdmf import DolfinxRows, dolfinx_layout
-
     mesh = model.geo.mesh
     layout, rows = dolfinx_layout(mesh), DolfinxRows(mesh)
     comm = mesh.comm

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from mpi4py import MPI
+from tqdm import tqdm
 
 from solver import __version__
 from solver.config import load
@@ -81,8 +82,6 @@ def _progress(comm: MPI.Comm, steps: int, enabled: bool):
         return None, lambda row: None
     if not sys.stderr.isatty():
         return None, _log_lines(steps)
-    from tqdm import tqdm
-
     bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr, mininterval=0.2)
 
     def update(row: dict) -> None:

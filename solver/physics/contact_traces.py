@@ -56,9 +56,8 @@ class ContactTraces:
         mass = sum(lam * psi * geo.ds(geo.tags[q.name], metadata={"quadrature_degree": 2 * p}) for q in parts)
         A = fpetsc.assemble_matrix(fem.form(mass))
         A.assemble()
-        # only the Γ_C block is factored: the rows off Γ_C are empty (the right-hand sides vanish there too). The
-        # whole matrix with 1 on the diagonal off Γ_C and the volume stencil's pattern filled like a volume
-        # Laplacian: 5.3 s and 35 ms a solve at 36,501 dofs in 3-D against <0.1 s (issue 30, start-up)
+        # only the Γ_C block is factored: the rows off Γ_C are empty (the right-hand sides vanish there too); the
+        # whole matrix, with 1 on the diagonal off Γ_C, fills like a volume Laplacian (docs/developer/design-notes.md)
         marker = fem.Function(S)  # the owned dofs on Γ_C: also those whose Γ_C facets are all on another rank
         marker.x.array[self.on] = 1.0
         marker.x.scatter_reverse(la.ScatterMode.add)

@@ -33,8 +33,8 @@ from solver.physics.operators import Operators
 
 def dirichlet_rows_form(ops: Operators, constrained: np.ndarray) -> fem.Form:
     """The bulk form sigma(du) : eps(w) over the cells that hold a Dirichlet dof on any rank (``constrained``: the
-    owned ones, unrolled local indices). Its matrix has K_full's Dirichlet rows whole and nothing far from them:
-    at 311,469 dofs in 3-D Example 1, 3.2 % of K's nonzeros where the whole K was assembled before (issue 30)."""
+    owned ones, unrolled local indices). Its matrix has K_full's Dirichlet rows whole and nothing far from them,
+    a few per cent of K's nonzeros (docs/developer/design-notes.md)."""
     V = ops.du.ufl_function_space()
     mesh = V.mesh
     tdim = mesh.topology.dim

@@ -21,12 +21,31 @@ import numpy as np
 
 from solver.errors import UsageError
 from solver.io.layout import ResultsDir
+from solver.post.charts import pyplot
 from solver.post.results import read_csv, read_profile, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
 
 
-def _grid(res: dict, t: float, warp: float):
+def _pyvista():
+    """pyvista, off screen, with VTK's log at errors only (without an X server VTK warns, in ANSI yellow, before it
+    renders anyway)."""
     import pyvista as pv
+    from vtkmodules.vtkCommonCore import vtkLogger
 
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
+    pv.OFF_SCREEN = True
+    return pv
+
+
+def _pyplot(what: str):
+    """matplotlib's pyplot off screen; a one-line error where the plotting extra is missing."""
+    plt = pyplot(what)
+    if plt is None:
+        raise UsageError(f"{what} needs matplotlib: make install PLOTS=1")
+    return plt
+
+
+def _grid(res: dict, t: float, warp: float):
+    pv = _pyvista()
     x = np.zeros((res["geometry"].shape[0], 3))
     x[:, : res["geometry"].shape[1]] = res["geometry"]
     u = res["fields"].get("displacement", {}).get(t)  # no displacement written: the undeformed body
@@ -71,12 +90,7 @@ def _range(values: np.ndarray, clim):
 
 
 def render(res: dict, field: str, t: float, warp: float, path: Path, title: str, clim=None, cmap="viridis") -> None:
-    import pyvista as pv
-    from vtkmodules.vtkCommonCore import vtkLogger
-
-    # off screen without an X server VTK warns (in ANSI yellow) before it renders anyway: errors only
-    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
-    pv.OFF_SCREEN = True
+    pv = _pyvista()
     grid = _grid(res, t, warp)
     values = res["fields"][field][t]
     if values.ndim > 1:
@@ -117,10 +131,7 @@ def render(res: dict, field: str, t: float, warp: float, path: Path, title: str,
 
 
 def timeseries(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot("the time-series chart")
 
     t = [r["t"] for r in rows]
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
@@ -138,11 +149,7 @@ def timeseries(rows: list[dict], path: Path) -> None:
 
 def contact_profiles(profile: dict, out: Path) -> list[Path]:
     """p(s) at the written levels per contact part (:func:`read_profile`'s dict), the last one's zone shaded."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot("the contact profile chart")
     made = []
     for part in sorted({name for _, name in profile}):
         steps = sorted(step for step, name in profile if name == part)
