@@ -13,8 +13,8 @@ g is one of
 In the UFL terms a non-constant g is a discontinuous Lagrange function of degree k, filled once per run:
 on each cell with a contact facet its values are the polynomial that takes g's values at the facet
 quadrature points (mapped as FFCx maps them: the reference facet's rule onto the reference cell's facet),
-so the form sees g exactly at its points, at a cost independent of the table's rows (a table used to be a
-UFL sum of one clamped ramp per row: 1,500 rows exceeded UFL's recursion limit).
+so the form sees g exactly at its points, at a cost independent of the table's rows (a UFL sum of one clamped
+ramp per row would exceed UFL's recursion limit at some thousand rows).
 """
 
 from __future__ import annotations
