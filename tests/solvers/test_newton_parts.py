@@ -107,8 +107,10 @@ def test_krylov_tolerance_only_for_an_iterative_solver_the_scene_leaves_alone():
 
 
 def _problem(contact, memory):
+    """A problem with a contact term or not, and with the implicit memory term (which removes the split) or not."""
     vec = PETSc.Vec().createSeq(3, comm=MPI.COMM_SELF)
-    return SimpleNamespace(contact=contact, Fm=memory, u=SimpleNamespace(vector=vec))
+    split = None if memory is not None else object()
+    return SimpleNamespace(contact=contact, Fm=memory, split=split, u=SimpleNamespace(vector=vec))
 
 
 @pytest.mark.parametrize("scene,contact,memory,allowed", [
