@@ -18,8 +18,6 @@ first active set predicted from the last two levels: v + PREDICT (v - v_prev).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import scipy.linalg as sla
 from dolfinx.fem import petsc as fpetsc
@@ -31,10 +29,8 @@ from solver.solvers.condensation import Condensation
 from solver.solvers.contact_dofs import contact_block
 from solver.solvers.damped_newton import illinois_root
 from solver.solvers.energy_newton import FREE_STEPS
+from solver.solvers.point_contact import PointContact
 from solver.solvers.settings import NewtonSettings
-
-if TYPE_CHECKING:
-    from solver.solvers.condensed import PointContact
 
 # the first step's active set is the one at v + PREDICT (v - v_prev), v_prev the last level's start: half the last
 # level's motion, measured best (docs/model.md §4)
