@@ -6,8 +6,9 @@
 #
 #   sudo bash scripts/check-slurm.sh          (root: installs slurm-wlm and munge with apt-get, starts the daemons)
 #
-# Environment: CHECK_SLURM_K (time step of the scene, default 0.001: 1000 levels of Example 1 at 8 x 8, over a
-# minute on 2 unloaded cores, so that the limit cuts it), CHECK_SLURM_MINUTES (the time limit, default 1),
+# Environment: CHECK_SLURM_N and CHECK_SLURM_K (Example 1's mesh n x n and time step, default 64 and 0.0001:
+# 10,000 levels, about a minute on 2 unloaded cores beside the uninterrupted run, so that the limit cuts it; at
+# 8 x 8 and k = 0.001 the whole run took 2 s), CHECK_SLURM_MINUTES (the time limit, default 1),
 # CHECK_SLURM_DIR (scratch folder, default a new one under /tmp, removed on success). The daemons are stopped on exit.
 # The controller checks limits at 30-second ticks: with a 1-minute limit and the warning 30 s before it, each try
 # gets 20-30 s, so on a loaded machine, where start-up takes most of that, a try may advance a single level
@@ -16,7 +17,8 @@ set -euo pipefail
 
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 PY="$repo/.venv/bin/python"
-K=${CHECK_SLURM_K:-0.001}
+K=${CHECK_SLURM_K:-0.0001}
+N=${CHECK_SLURM_N:-64}
 MINUTES=${CHECK_SLURM_MINUTES:-1}
 work=${CHECK_SLURM_DIR:-$(mktemp -d /tmp/check-slurm.XXXXXX)}
 mkdir -p "$work"
@@ -89,7 +91,7 @@ awk '/<!-- check-slurm: job script -->/ {on = 1; next} on && /^```bash/ {inblock
 grep -q '^#SBATCH --requeue' "$job" && grep -q 'srun --mpi=pmix' "$job" \
   || die "no job script found after '<!-- check-slurm: job script -->' in docs/install/cluster.md"
 
-scene=(configs/example1.toml --set mesh.nx=8 --set mesh.ny=8 --set "time.k=$K" --set output.every=20)
+scene=(configs/example1.toml --set "mesh.nx=$N" --set "mesh.ny=$N" --set "time.k=$K" --set output.every=200)
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 
 # the uninterrupted run, outside Slurm, while the job runs
