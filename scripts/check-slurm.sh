@@ -43,9 +43,14 @@ chown munge:munge /run/munge
 [ -s /etc/munge/munge.key ] || die "no /etc/munge/munge.key (the munge package makes it)"
 started=()
 stop_daemons() {
+  local pids=()
   for pidfile in "$work/slurmd.pid" "$work/slurmctld.pid" "${started[@]}"; do
-    [ -s "$pidfile" ] && kill "$(cat "$pidfile")" 2>/dev/null || true
+    [ -s "$pidfile" ] && pids+=("$(cat "$pidfile")")
   done
+  [ ${#pids[@]} -eq 0 ] && return 0
+  kill "${pids[@]}" 2>/dev/null || true
+  for _ in $(seq 30); do kill -0 "${pids[@]}" 2>/dev/null || return 0; sleep 0.5; done
+  kill -9 "${pids[@]}" 2>/dev/null || true
 }
 trap stop_daemons EXIT
 trap 'exit 130' INT   # so that the EXIT trap stops the daemons on a signal too
@@ -172,5 +177,6 @@ for name, values in gb["fields"].items():
 print(f"check-slurm: {len(rb)} levels and {len(gb['times'])} written fields equal the uninterrupted run's "
       f"(worst relative difference {worst:.1e})")
 EOF
+stop_daemons  # before the pid files go with the scratch folder
 rm -rf "$work"
 say "ok"
