@@ -189,3 +189,24 @@ def test_run_help_lists_the_files_of_the_layout():
     res = cli(["run", "--help"])
     assert res.returncode == 0 and layout.listing() in " ".join(res.stdout.split())
     assert all(name in layout.listing() for name in layout.TOP_FILES)
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+@pytest.mark.parametrize("argv, line", [
+    (["run", "configs/example1.toml", "--set", "time.k", "0.01"],
+     "error: solver: unrecognized arguments: 0.01 (--set takes SECTION.KEY=VALUE as one word: --set time.k=0.01); "
+     "see solver --help"),
+    (["run", "configs/example1.toml", "--overwrite", "--restart"],
+     "error: solver run: argument --restart: not allowed with argument --overwrite; see solver run --help"),
+])
+def test_command_line_mistakes_are_one_line_exit_2(tmp_path, argv, line, nproc):
+    res = cli([*argv, "--output", str(tmp_path / "o")], nproc)
+    assert res.returncode == 2
+    ours = [ln for ln in res.stderr.splitlines() if ln.startswith("error")]
+    assert ours == [line], res.stderr
+    assert "usage:" not in res.stderr and not (tmp_path / "o").exists()
+
+
+def test_help_has_no_markup():
+    res = cli(["--help"])
+    assert res.returncode == 0 and "``" not in res.stdout and "python -m solver" in res.stdout
