@@ -86,7 +86,7 @@ engine_mpi() {
 engine_size() {
   local bytes
   bytes=$("$ENGINE" image inspect "$IMAGE" --format '{{.Size}}')
-  awk -v i="$IMAGE" -v b="$bytes" 'BEGIN { printf "image %s: %d bytes (%.2f GB)\n", i, b, b / 1e9 }' >&2
+  awk -v i="$IMAGE" -v b="$bytes" 'BEGIN { printf "image %s: %.0f bytes (%.2f GB)\n", i, b, b / 1e9 }' >&2
 }
 
 engine_phase() {  # name command...: a phase whose failure is recorded, and the check goes on
