@@ -78,7 +78,10 @@ class ContactTerm:
     def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
                  degree: int, bcs) -> None:
         du, w = arguments
-        Fc = residual(u, w, geo, parts, degree)
+        # the contact term's factor: 1 but while a first contact is solved by a continuation in the compliance
+        # (solvers/continuation.py: s j(u) is the term of the laws s p, softer for s < 1)
+        self.scale = fem.Constant(geo.mesh, PETSc.ScalarType(1.0))
+        Fc = self.scale * residual(u, w, geo, parts, degree)
         self.residual_form = fem.form(Fc)
         self.jacobian_ufl = ufl.derivative(Fc, u, du)
         self.jacobian_form = fem.form(self.jacobian_ufl)
