@@ -26,7 +26,7 @@ from petsc4py import PETSc
 from solver.errors import DisplacementSolveError
 from solver.physics.contact import ContactTerm
 from solver.physics.displacement import DisplacementProblem, SolveInfo
-from solver.solvers.continuation import STAGE_ITERATIONS, ComplianceContinuation
+from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, ComplianceContinuation
 from solver.solvers.cycle_watch import CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
 from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
@@ -275,14 +275,21 @@ class NewtonSolver(DisplacementMethod):
                             self.fallback.krylov_iterations)
 
     def _first_contact(self) -> tuple[int, list[float], int]:
-        """A first contact through the compliance path (continuation.py): each stage at most STAGE_ITERATIONS
-        steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last
-        stage's reason, the residual history (each stage's but its last, the last stage's whole) and the
-        iterations of all stages."""
+        """A first contact: plain Newton for at most FIRST_STEPS iterations, and where that does not solve the
+        level, the compliance path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS
+        steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last run's
+        reason, the residual history (each run's but its last, the last one's whole) and the iterations of all."""
         core, path = self.core, self.continuation
         test, limit = core.test, core.test.max_it
-        history: list[float] = []
-        its = 0
+        R = PETSc.SNES.ConvergedReason
+        test.max_it = min(FIRST_STEPS, limit)
+        try:
+            reason, first, its = core.plain_newton()
+        finally:
+            test.max_it = limit
+        if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit:
+            return reason, first, its
+        history = list(first[:its])
         try:
             for s in path.scales:
                 path.set_scale(s)
@@ -290,7 +297,7 @@ class NewtonSolver(DisplacementMethod):
                 reason, stage, n = core.plain_newton()
                 history.extend(stage[:n])
                 its += n
-                if reason < 0 and reason not in (PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT, DIVERGED_CYCLE):
+                if reason < 0 and reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE):
                     break  # a failed solve: the level's own problem from here, as plain Newton would
         finally:
             test.max_it = limit
