@@ -93,6 +93,7 @@ class ContactTerm:
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
         self.piecewise_linear = all(p.contact_law.piecewise_linear for p in parts)
+        self.linear = all(isinstance(p.contact_law, LinearLaw) for p in parts)  # every part's law p = r_+ / mu
         # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
         # a law without a fixed stiffness (power: p'(r) = c m r^(m-1)) is left out
         stiff = [(p, p.contact_law.stiffness) for p in parts if p.contact_law.stiffness is not None]

@@ -45,3 +45,6 @@ def test_path_only_for_a_stiff_contact(comm):
     assert path.scales == tuple(sorted(path.scales)) and 0.0 < path.scales[0] and path.scales[-1] < 1.0
     assert path.applies()  # u = 0 touches nothing: a first contact
     assert ComplianceContinuation(soft).scales == ()
+    limited = hertz_line(16)
+    limited["boundary"]["bottom"].update(law="limited_penetration", mu=1e-6, depth=1e-7, mu_stiff=1e-10)
+    assert ComplianceContinuation(build_model(from_dict(limited), comm).mech.problem).scales == ()  # linear law only
