@@ -5,8 +5,8 @@ solve without contact: the body moves onto the obstacle as if it were not there 
 displacement would. That zone is wider than the contact zone (by sqrt 2 in radius for Hertz's sphere), and from it
 the stiff law's Newton shrinks the zone by about one contact point per iteration: the point at its edge is the only
 one in tension, where a rigid punch held over the whole zone has its singular edge pressure. So the iterations grow
-with the number of points between the two zones: 23 (P1, n = 200) and 36 (P2, n = 100) on Hertz line contact, 48
-on a 3-D sphere (measured: docs/model.md §4).
+with the number of points between the two zones: 23 (P1, n = 200) and 42 (P2, n = 100) on Hertz line contact
+(measured: docs/model.md §4).
 
 The cure is a path in the compliance: the contact term s j(u) (the laws s p, as soft as mu / s) for s going up
 geometrically to 1, each stage started from the last. Where the contact is soft against the body (its stiffness
@@ -34,7 +34,7 @@ from petsc4py import PETSc
 
 from solver.physics.displacement import DisplacementProblem
 
-# the stages' contact stiffness against K's diagonal; a stage whose s would be >= 1 is left out
+# the stages' contact stiffness against K's diagonal (each s = ratio / R < 1: the path is taken where R > STIFF)
 RATIOS = (1.0, 10.0, 100.0)
 FIRST_STEPS = 3  # plain Newton's iterations on a first contact before the path is taken (from where they end)
 STAGE_ITERATIONS = 2  # Newton steps of a stage before s grows (its residual need not meet the tolerance)

@@ -274,7 +274,7 @@ class NewtonSolver(DisplacementMethod):
         return core.outcome(reason, name, history, its, scale, core.factorizations - f0,
                             self.fallback.krylov_iterations)
 
-    def _first_contact(self) -> tuple[int, list[float], int]:
+    def _first_contact(self) -> tuple[int, np.ndarray, int]:
         """A first contact: plain Newton for at most FIRST_STEPS iterations, and where that does not solve the
         level, the compliance path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS
         steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last run's
