@@ -6,7 +6,7 @@ scenes at small sizes with every contact method that applies (``fixed_point`` an
 
     python scripts/same_results.py run --out /tmp/after [--nproc 2] [--only hard]
     python scripts/same_results.py run --out /tmp/before --src CHECKOUT_OF_THE_BASE   # the base's code
-    python scripts/same_results.py compare /tmp/before /tmp/after [--rtol 1e-12]
+    python scripts/same_results.py compare /tmp/before /tmp/after [--rtol 1e-12] [--results-only]
 
 ``run`` runs each case with ``python -m solver run`` of ``--src`` (this tree by default, the interpreter being
 this one); ``compare`` prints a row per case and exits 1 if any differs or is missing. Timings are not compared.
@@ -51,12 +51,12 @@ POINT_METHODS = {"fixed_point", "penalty_duality"}
 TIMING = ("time_", "wall_time")
 
 
-def cases(only: list[str]) -> dict[str, tuple[str, list[str]]]:
+def cases(only: list[str], methods: list[str] | None = None) -> dict[str, tuple[str, list[str]]]:
     out = {}
     for name, (scene, sets, planar) in SCENES.items():
         if only and not any(o in name for o in only):
             continue
-        for method in METHODS:
+        for method in methods or METHODS:
             if method in POINT_METHODS and not planar:
                 continue
             out[f"{name}-{method}"] = (scene, [*sets, f"solver.method='{method}'", "output.every=5"])
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     env = {**os.environ, "PYTHONPATH": str(src)}
     launch = [sys.executable] if args.nproc == 1 else ["mpirun", "-n", str(args.nproc), sys.executable]
     failed = 0
-    for name, (scene, sets) in cases(args.only).items():
+    for name, (scene, sets) in cases(args.only, args.methods).items():
         out = Path(args.out) / name
         cmd = [*launch, "-m", "solver", "run", str(src / "configs" / scene), "--output", str(out), "--overwrite",
                "--no-progress", *(a for s in sets for a in ("--set", s))]
@@ -143,7 +143,11 @@ def _shared_scale(cols: dict[str, np.ndarray], key: str) -> float | None:
     return max(float(np.nanmax(np.abs(p), initial=0.0)) for p in parts) if parts else None
 
 
-def compare_case(base: Path, new: Path) -> tuple[float, str]:
+# the solver's own counters and its final residual: what a change of method changes while the results stay
+SOLVER_COUNTS = ("newton_iterations", "linear_solves", "factorizations", "krylov_iterations", "residual")
+
+
+def compare_case(base: Path, new: Path, skip: tuple[str, ...] = ()) -> tuple[float, str]:
     """(the worst relative difference, where) of one case; inf where something is missing or shaped otherwise."""
     for folder in (base, new):
         if not (folder / "exit_code").exists():
@@ -159,7 +163,7 @@ def compare_case(base: Path, new: Path) -> tuple[float, str]:
         if set(a) != set(b):
             return np.inf, f"{name}: columns {sorted(set(a) ^ set(b))}"
         for key in b:
-            if key.startswith(TIMING):
+            if key.startswith(TIMING) or key in skip:
                 continue
             if key == "s" and "z" in b and np.any(b["z"] != 0.0):
                 continue  # "s along the part" on a 3-D face depends on the order ranks gather its points in
@@ -182,7 +186,7 @@ def compare(args: argparse.Namespace) -> int:
     ran = [n for n in names if (base / n / "exit_code").exists() and (new / n / "exit_code").exists()]
     bad = 0
     for name in ran:
-        worst, where = compare_case(base / name, new / name)
+        worst, where = compare_case(base / name, new / name, SOLVER_COUNTS if args.results_only else ())
         ok = worst <= args.rtol
         bad += not ok
         print(f"{'same' if ok else 'DIFFERS'}  {name:36s} {worst:9.2e}  {where}")
@@ -199,11 +203,14 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--src", default=str(ROOT), help="the tree whose solver runs (default: this one)")
     r.add_argument("--nproc", type=int, default=1)
     r.add_argument("--only", nargs="*", default=[], help="cases whose name contains one of these")
+    r.add_argument("--methods", nargs="*", choices=METHODS, help="only these methods (default: every one)")
     c = sub.add_parser("compare", help="compare two --out folders")
     c.add_argument("base")
     c.add_argument("new")
     c.add_argument("--rtol", type=float, default=1e-12)
     c.add_argument("--all", action="store_true", help="fail where a case ran in one folder only")
+    c.add_argument("--results-only", action="store_true",
+                   help="leave out the solver's counters and final residual (a change of method: the same results)")
     args = parser.parse_args(argv)
     return run(args) if args.command == "run" else compare(args)
 

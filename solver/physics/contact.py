@@ -78,7 +78,10 @@ class ContactTerm:
     def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
                  degree: int, bcs) -> None:
         du, w = arguments
-        Fc = residual(u, w, geo, parts, degree)
+        # the contact term's factor: 1 but while a first contact is solved by a continuation in the compliance
+        # (solvers/continuation.py: s j(u) is the term of the laws s p, softer for s < 1)
+        self.scale = fem.Constant(geo.mesh, PETSc.ScalarType(1.0))
+        Fc = self.scale * residual(u, w, geo, parts, degree)
         self.residual_form = fem.form(Fc)
         self.jacobian_ufl = ufl.derivative(Fc, u, du)
         self.jacobian_form = fem.form(self.jacobian_ufl)
@@ -90,6 +93,7 @@ class ContactTerm:
         self._print = self.C.createVecLeft()
         self._last: np.ndarray | None = None
         self.piecewise_linear = all(p.contact_law.piecewise_linear for p in parts)
+        self.linear = all(isinstance(p.contact_law, LinearLaw) for p in parts)  # every part's law p = r_+ / mu
         # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
         # a law without a fixed stiffness (power: p'(r) = c m r^(m-1)) is left out
         stiff = [(p, p.contact_law.stiffness) for p in parts if p.contact_law.stiffness is not None]

@@ -26,6 +26,7 @@ from petsc4py import PETSc
 from solver.errors import DisplacementSolveError
 from solver.physics.contact import ContactTerm
 from solver.physics.displacement import DisplacementProblem, SolveInfo
+from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, ComplianceContinuation
 from solver.solvers.cycle_watch import CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
 from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
@@ -244,6 +245,7 @@ class NewtonSolver(DisplacementMethod):
     def __init__(self, core: NewtonCore, fallback: bool) -> None:
         self.core, self.problem = core, core.problem
         self.fallback = DampedFallback(core.problem, fallback, core.settings.max_it)
+        self.continuation = ComplianceContinuation(core.problem) if core.problem.contact is not None else None
 
     @property
     def fallbacks(self) -> int:
@@ -258,7 +260,10 @@ class NewtonSolver(DisplacementMethod):
         core.carry_first_residual()
         f0 = core.factorizations
         self.fallback.remember_start()
-        reason, history, its = core.plain_newton()
+        if self.continuation is not None and self.continuation.applies():
+            reason, history, its = self._first_contact()
+        else:
+            reason, history, its = core.plain_newton()
         cycled = core.cycles.cycled
         if reason < 0 and self.fallback.allowed:
             cycled = False  # the fallback's own reason names its outcome
@@ -268,3 +273,36 @@ class NewtonSolver(DisplacementMethod):
         name = CYCLE if (cycled and reason < 0) else REASONS_SNES.get(reason, str(reason))
         return core.outcome(reason, name, history, its, scale, core.factorizations - f0,
                             self.fallback.krylov_iterations)
+
+    def _first_contact(self) -> tuple[int, np.ndarray, int]:
+        """A first contact: plain Newton for at most FIRST_STEPS iterations, and where that does not solve the
+        level, the compliance path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS
+        steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last run's
+        reason, the residual history (each run's but its last, the last one's whole) and the iterations of all."""
+        core, path = self.core, self.continuation
+        test, limit = core.test, core.test.max_it
+        R = PETSc.SNES.ConvergedReason
+        test.max_it = min(FIRST_STEPS, limit)
+        try:
+            reason, first, its = core.plain_newton()
+        finally:
+            test.max_it = limit
+        if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit:
+            return reason, first, its
+        history = list(first[:its])
+        try:
+            for s in path.scales:
+                path.set_scale(s)
+                test.max_it = min(STAGE_ITERATIONS, limit)
+                reason, stage, n = core.plain_newton()
+                history.extend(stage[:n])
+                its += n
+                if reason < 0 and reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE):
+                    break  # a failed solve: the level's own problem from here, as plain Newton would
+        finally:
+            test.max_it = limit
+            path.set_scale(1.0)
+        path.levels += 1
+        reason, stage, n = core.plain_newton()
+        history.extend(stage[:n + 1])
+        return reason, np.asarray(history), its + n

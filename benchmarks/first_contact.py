@@ -1,0 +1,110 @@
+"""First contact's Newton iterations, two trees side by side: the Hertz scenes of docs/model.md §4.
+
+    python benchmarks/first_contact.py --base CHECKOUT_OF_THE_BASE [--only 2d] [--out benchmarks/results/first_contact]
+
+Each case's first level (t = 0, the elastic contact problem) is solved under the default settings (``auto``) by
+each tree in its own process (``one`` below, run with that tree on PYTHONPATH), base then this tree, case after
+case, on the same machine in the same run. Cases: Hertz line contact (a half block (0, 1)² pushed 0.005 onto
+g = x²/2, mu = 1e-8) at P1 n = 200 and P2 n = 100; the 3-D sphere (radius 2 pressed 0.015 into the quarter block
+(0, 2)³ with symmetry planes, gmsh mesh graded to 0.015 at the contact by meshes/hertz3d.py, P1, mu = 1e-8).
+Writes OUT.csv (case, tree, iterations, factorizations, contact force, seconds or the failure) and prints it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def line_contact(n: int, degree: int) -> dict:
+    s = np.linspace(0.0, 1.0, 5)
+    return {"memory": {"kernel": "none"}, "damage": {"enabled": False}, "time": {"T": 1.0, "k": 1.0},
+            "mesh": {"nx": n, "ny": n}, "material": {"E": 1.0, "nu": 0.3}, "discretization": {"u_degree": degree},
+            "boundary": {"left": {"role": "displacement", "displacement": [0.0, "free"]},
+                         "top": {"role": "displacement", "displacement": ["free", -0.005]},
+                         "bottom": {"role": "contact", "mu": 1e-8, "gap": [[v, v * v / 2] for v in s.tolist()],
+                                    "gap_coordinate": "x", "gap_interpolation": "cubic"}}}
+
+
+def sphere(msh: str) -> dict:
+    return {"memory": {"kernel": "none"}, "damage": {"enabled": False}, "time": {"T": 1.0, "k": 1.0},
+            "mesh": {"kind": "gmsh", "file": msh}, "material": {"E": 1.0, "nu": 0.3, "model": "3d"},
+            "boundary": {"sym_x": {"role": "displacement", "displacement": [0.0, "free", "free"]},
+                         "sym_y": {"role": "displacement", "displacement": ["free", 0.0, "free"]},
+                         "top": {"role": "displacement", "displacement": ["free", "free", -0.015]},
+                         "bottom": {"role": "contact", "mu": 1e-8,
+                                    "obstacle": {"shape": "sphere", "centre": [0.0, 0.0, -2.0], "radius": 2.0}}}}
+
+
+def one(scene: dict) -> dict:
+    """The first level of ``scene`` by the solver on sys.path (the tree under test)."""
+    from mpi4py import MPI
+
+    from solver.config import from_dict
+    from solver.run.model import build_model
+    from solver.run.stepper import Stepper
+
+    t = time.perf_counter()
+    model = build_model(from_dict(scene), MPI.COMM_WORLD)
+    try:
+        row = Stepper(model).step(0)
+    except Exception as exc:  # a failed level is a result here
+        return {"failure": str(exc).splitlines()[0][:160], "seconds": time.perf_counter() - t}
+    return {"iterations": row["newton_iterations"], "factorizations": row["factorizations"],
+            "contact_force": row["contact_force"], "seconds": time.perf_counter() - t}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="cmd")
+    o = sub.add_parser("one")
+    o.add_argument("scene")
+    parser.add_argument("--base", help="a checkout of the base tree")
+    parser.add_argument("--only", nargs="*", default=[], help="cases whose name contains one of these")
+    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "first_contact"))
+    args = parser.parse_args()
+    if args.cmd == "one":
+        print(json.dumps(one(json.loads(Path(args.scene).read_text()))))
+        return 0
+    work = Path(tempfile.mkdtemp(prefix="first_contact_"))
+    msh = work / "hertz3d.msh"
+    subprocess.run([sys.executable, str(ROOT / "meshes" / "hertz3d.py"), "--h", "0.015", "--output", str(msh)],
+                   check=True)
+    cases = {"line_P1_n200": line_contact(200, 1), "line_P2_n100": line_contact(100, 2), "sphere3d_h0.015": sphere(str(msh))}
+    trees = ([("base", Path(args.base).resolve())] if args.base else []) + [("this", ROOT)]
+    rows = []
+    for name, scene in cases.items():
+        if args.only and not any(o in name for o in args.only):
+            continue
+        path = work / f"{name}.json"
+        path.write_text(json.dumps(scene))
+        for tree, src in trees:
+            env = {**os.environ, "PYTHONPATH": str(src)}
+            done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "one", str(path)], env=env,
+                                  cwd=src, capture_output=True, text=True)
+            out = json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else {
+                "failure": done.stderr.strip().splitlines()[-1:]}
+            rows.append({"case": name, "tree": tree, **out})
+            print(rows[-1], flush=True)
+    keys = ["case", "tree", "iterations", "factorizations", "contact_force", "seconds", "failure"]
+    with open(f"{args.out}.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in keys})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
