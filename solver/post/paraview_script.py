@@ -49,8 +49,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--field", default="von_mises_elastic", help="array to colour by (default: von_mises_elastic)")
     p.add_argument("--time", type=float, default=None, help="time to show (nearest written time; default: the last)")
     p.add_argument("--warp", type=float, default=None,
-                   help="displacement scale factor (default: automatic, the largest displacement of the last written "
-                        "level drawn as 10%% of the body size, as solver plot does)")
+                   help="displacement scale factor (default: automatic, the largest displacement over the written "
+                        "levels (21 of a longer series) drawn as 10%% of the body size, as solver plot does)")
     p.add_argument("--output", default=None, help="PNG to write (default: RESULTS_DIR/paraview_<field>.png)")
     p.add_argument("--size", type=int, nargs=2, default=(1200, 800), metavar=("W", "H"), help="image size in pixels")
     p.add_argument("--colormap", default=None, help="ParaView colour preset (default: Turbo; Inferno for damage)")
@@ -260,18 +260,31 @@ def _chosen_time(times: list, asked: float | None) -> float:
     return t
 
 
-def _warp(args: argparse.Namespace, reader, last: float, body: float, has_u: bool) -> float:
-    """The displacement's scale factor: the user's, or one that draws the largest displacement of the last written
-    level (``last``) as ~10% of the body, whatever the time shown (``solver plot``'s factor, the same for every
-    picture of a run)."""
+WARP_LEVELS = 21  # the levels the automatic warp looks at: all of a short series, 21 evenly spaced of a longer one
+
+
+def warp_levels(n: int) -> list[int]:
+    """Indices of the written levels (of ``n``) whose displacement sets the automatic warp: all up to 21, else 21
+    evenly spaced, first and last included (solver plot's plots.warp_levels: the same factor in both)."""
+    if n <= WARP_LEVELS:
+        return list(range(n))
+    return sorted({round(i * (n - 1) / (WARP_LEVELS - 1)) for i in range(WARP_LEVELS)})
+
+
+def _warp(args: argparse.Namespace, reader, times: list, t: float, body: float, has_u: bool) -> float:
+    """The displacement's scale factor: the user's, or one that draws the largest displacement over the written
+    levels (:func:`warp_levels`: 21 reads at most) as ~10% of the body, whatever the time shown: one factor for every
+    picture of a run, ``solver plot``'s."""
     if not has_u:
         print("note: no 'displacement' array: drawing the undeformed mesh")
         return 0.0
     if args.warp is not None:
         return args.warp
-    umax = max_abs_component(reader, last)
+    levels = [times[i] for i in warp_levels(len(times))] or [t]
+    umax = max(max_abs_component(reader, s) for s in levels)
+    reader.UpdatePipeline(t)
     warp = nice_warp(body, umax)
-    print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} at the last level t = {fmt(last)} "
+    print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} over {len(levels)} written levels "
           f"drawn as ~10% of the body size {body:.3g})")
     return warp
 
@@ -422,7 +435,7 @@ def render(args: argparse.Namespace) -> int:
     reader.UpdatePipeline(t)
     b = reader.GetDataInformation().GetBounds()
     solid = b[5] - b[4] > 1e-12 * max(b[1] - b[0], b[3] - b[2], 1.0)
-    warp = _warp(args, reader, times[-1] if times else t, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]), has_u)
+    warp = _warp(args, reader, times, t, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]), has_u)
     nodes = None if from_csv is None else contact_points(pvs, directory, from_csv, t, reader, has_u, warp)
     if from_csv is not None and nodes is None:  # before the view is made: a view left at exit is an X error
         print(f"error: --field {args.field}: contact.csv has no row at t = {fmt(t)}", file=sys.stderr)

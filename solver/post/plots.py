@@ -12,8 +12,8 @@
   level, seen head-on, the pressure as colour and the contact zone's outline (u_ν = g).
 
 Each picture has its own colour range (its minimum to its maximum, as the bar shows) and flat colours (no lighting),
-so that a pixel's colour is the colour bar's at its value. The displacement is drawn x w, w the one
-``solver paraview`` uses by default (:func:`auto_warp`). Lengths and stresses are in the scene's units, which the
+so that a pixel's colour is the colour bar's at its value. The displacement is drawn x w, the same w in every
+picture of a run and in ``solver paraview``'s (:func:`auto_warp`). Lengths and stresses are in the scene's units, which the
 solver does not know: the axes say "(model units)".
 """
 
@@ -63,12 +63,25 @@ def _grid(res: dict, t: float, warp: float):
     return pv.UnstructuredGrid(conn, np.full(len(cells), kind, dtype=np.uint8), x)
 
 
+WARP_LEVELS = 21  # the levels the automatic warp looks at: all of a short series, 21 evenly spaced of a longer one
+
+
+def warp_levels(n: int) -> list[int]:
+    """Indices of the written levels (of ``n``) whose displacement sets the automatic warp: all up to 21, else 21
+    evenly spaced, first and last included (``solver paraview`` reads the same ones: paraview_script.warp_levels)."""
+    return sorted({round(i * (n - 1) / (WARP_LEVELS - 1)) for i in range(WARP_LEVELS)}) if n > WARP_LEVELS else \
+        list(range(n))
+
+
 def auto_warp(res: dict) -> float:
-    """The largest displacement component of the last written level drawn as 10 % of the body's size (rounded down
-    to 1, 2 or 5 x 10^m): the same factor as ``solver paraview``'s default (paraview_script.nice_warp)."""
+    """The largest displacement component over the written levels (:func:`warp_levels`) drawn as 10 % of the body's
+    size, rounded down to 1, 2 or 5 x 10^m: one factor for every picture of a run, the same as ``solver paraview``'s
+    default (paraview_script.nice_warp)."""
     size = np.ptp(res["geometry"], axis=0).max()
     levels = res["fields"].get("displacement", {})
-    umax = _finite_max(np.abs(levels[max(levels)])) if levels else 0.0
+    times = sorted(levels)
+    tops = [_finite_max(np.abs(levels[times[i]])) for i in warp_levels(len(times))]
+    umax = max((m for m in tops if np.isfinite(m)), default=0.0)
     if not umax > 0:  # nothing moves (or no displacement was written, or none of it is finite)
         return 1.0
     w = 0.1 * size / umax
@@ -94,6 +107,14 @@ def _range(values: np.ndarray, clim):
     v = float(np.mean(finite)) if finite.size else 0.0
     pad = 0.5 * abs(v) if v else 1.0
     return (v - pad, v + pad), f" -- constant: {v:.6g} everywhere"
+
+
+def number_format(lo: float, hi: float) -> str:
+    """A printf format with enough significant digits that the ends of [lo, hi] and the ticks between differ
+    (3, more for a narrow range far from 0: damage from 0.9986 to 0.9999)."""
+    span, mag = abs(hi - lo), max(abs(lo), abs(hi))
+    digits = 3 if not (span > 0 and mag > 0) else max(3, int(np.ceil(np.log10(mag / span))) + 2)
+    return f"%.{min(digits, 10)}g"
 
 
 BAR_TITLES = {"damage": "damage zeta\n(dimensionless)", "von_mises_elastic": "von Mises A eps(u)\n(model units)",
@@ -124,14 +145,15 @@ def render(res: dict, field: str, t: float, warp: float, path: Path, title: str,
     p = pv.Plotter(off_screen=True, window_size=(900, 650))
     p.add_mesh(edges, color="gray", line_width=1, lighting=False)
     bar = BAR_TITLES.get(field, field.replace("_", " ") + "\n(model units)")
+    fmt = number_format(*clim)
     p.add_mesh(grid, scalars=field, cmap=cmap, clim=clim, show_edges=False, lighting=False,
                # the bar at the right edge, beside the body (not over its contact edge), its title above it
-               scalar_bar_args={"title": bar + "\n", "vertical": True, "fmt": "%.3g", "color": "black",
+               scalar_bar_args={"title": bar + "\n", "vertical": True, "fmt": fmt, "color": "black",
                                 "position_x": 0.84, "position_y": 0.12, "width": 0.08, "height": 0.7,
                                 "title_font_size": 16, "label_font_size": 14})
     p.set_background("white")
     p.add_text(f"{title}\nt = {t:g}, displacement x {warp:g} (grey: undeformed); "
-               f"colours from {clim[0]:.3g} to {clim[1]:.3g}", font_size=10, color="black")
+               f"colours from {fmt % clim[0]} to {fmt % clim[1]}", font_size=10, color="black")
     axes = {"xtitle": "x (model units)", "ytitle": "y (model units)", "ztitle": "z (model units)", "color": "black",
             "font_size": 10, "fmt": "%.2g"}
     if solid:
@@ -200,9 +222,9 @@ def _profile(plt, profile: dict, steps: list[int], part: str):
     lines.set_array(times)
     last = levels[-1]
     active = last["penetration"] > 0
-    if active.any():  # the zone of the last level: the span of its active nodes
-        top.axvspan(last["s"][active].min(), last["s"][active].max(), color="0.9", zorder=0,
-                    label=f"contact zone $u_\\nu > g$ at t = {times[-1]:g}")
+    if active.any():  # the zone of the last level: the segments between its active nodes (a node out of it breaks it)
+        top.fill_between(last["s"], 0, 1, where=active, transform=top.get_xaxis_transform(), color="0.88",
+                         zorder=0, linewidth=0, label=f"contact zone $u_\\nu > g$ at t = {times[-1]:g}")
         top.legend(fontsize=8, loc="upper right")
     top.add_collection(lines)
     top.autoscale_view()

@@ -232,3 +232,13 @@ def test_a_contact_field_not_written_is_drawn_from_contact_csv(tmp_path, paravie
     assert "drawn from contact.csv's 'pressure' column" in res.stdout and png.stat().st_size > 10_000
     res = render(str(out), "--field", "gap", "--time", "0.5", "--output", str(png))
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+
+
+def test_plot_and_paraview_warp_by_the_same_levels():
+    """solver plot and solver paraview take the automatic warp from the same written levels (the same factor)."""
+    from solver.post.plots import warp_levels
+
+    script = _script()
+    for n in (1, 2, 21, 22, 101, 1001):
+        assert script.warp_levels(n) == warp_levels(n)
+        assert warp_levels(n)[0] == 0 and warp_levels(n)[-1] == n - 1 and len(warp_levels(n)) == min(n, 21)
