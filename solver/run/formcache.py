@@ -17,14 +17,19 @@ listing the cache directory, which a CLI run's start-up would otherwise pay once
 A compile is quiet: FFCx's JIT builds the module with distutils, which logs four lines a module (the gcc command
 lines) to the root logger at INFO and sets the root logger's level to INFO, and ``import ffcx`` gave the root
 logger a stderr handler: 24 lines on stderr for a model's six contact forms. Records below WARNING logged during
-a compile are dropped unless :func:`show_compiler_output` (``solver run --verbose``) asked for them.
+a compile are dropped, and what gcc writes to the process's stderr held back (written out if the compile fails),
+unless :func:`show_compiler_output` (``solver run --verbose``) asked for them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib.machinery
 import importlib.util
 import logging
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import ffcx.codegeneration.jit as ffcx_jit
@@ -95,7 +100,9 @@ class _BelowWarning(logging.Filter):
 
 
 def _compile_quietly(*args, **kwargs):
-    """FFCx's ``_compile_objects``, counted, its INFO and DEBUG records dropped unless asked for."""
+    """FFCx's ``_compile_objects``, counted, its INFO and DEBUG records dropped and what gcc itself writes to the
+    process's stderr (its warnings on the generated C) held back, unless asked for; a failed compile lets through
+    what gcc said."""
     compilations["count"] += 1
     if _show["compiler"]:
         return _compile(*args, **kwargs)
@@ -104,10 +111,38 @@ def _compile_quietly(*args, **kwargs):
     for t in targets:
         t.addFilter(quiet)
     try:
-        return _compile(*args, **kwargs)
+        with _stderr_held() as said:
+            try:
+                return _compile(*args, **kwargs)
+            except BaseException:
+                said.append(True)  # keep what gcc wrote: it says why
+                raise
     finally:
         for t in targets:
             t.removeFilter(quiet)
+
+
+@contextlib.contextmanager
+def _stderr_held():
+    """File descriptor 2 into a temporary file for the block; its text is dropped, or written back to stderr when
+    the block appended to the yielded list (a failure)."""
+    flag: list[bool] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no stderr to hold (a closed descriptor): nothing to do
+        yield flag
+        return
+    with tempfile.TemporaryFile(mode="w+b") as fh:
+        os.dup2(fh.fileno(), 2)
+        try:
+            yield flag
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if flag:
+                fh.seek(0)
+                sys.stderr.write(fh.read().decode(errors="replace"))
 
 
 def install() -> None:
