@@ -10,13 +10,14 @@ from ufl.domain import extract_unique_domain
 
 
 def constant(like: ufl.core.expr.Expr, value: float) -> ufl.core.expr.Expr:
-    """``value`` as a ``fem.Constant`` on the mesh of the expression ``like``; the plain number where ``like`` has no
-    mesh (a UFL literal, as in a check of the law by itself)."""
+    """``value`` as a ``fem.Constant`` on the mesh of the expression ``like``; the plain number where ``like`` is on
+    no dolfinx mesh (a UFL literal, as in a check of the law by itself with UFL's evaluator, which knows no Constant
+    it is not given)."""
     try:
         domain = extract_unique_domain(like)
     except ValueError:  # several meshes: cannot be, a law's argument is on one
         domain = None
-    if domain is None:
+    if domain is None or domain.ufl_cargo() is None:  # a bare UFL mesh: no dolfinx mesh (cargo) behind it
         return ufl.as_ufl(float(value))
     from dolfinx import fem  # here, not at the top: the laws' numpy forms need no dolfinx
 
