@@ -2,11 +2,17 @@
 
 Generated before each build: ``reference/scene.md`` (the scene keys, from solver/config/reference.py),
 ``developer/modules.md`` (every module's docstring) and ``demos/*.md`` (the demos/*.py jupytext scripts as
-Markdown, text beside the code).
+Markdown, text beside the code, followed by what the demo printed and the charts it drew: each demo is run in its
+own process, and its output kept in ``_build/demo-cache`` under a hash of the demo, ``solver/`` and ``configs/``, so
+that a build runs a demo again only when one of them changed; ``DOCS_RUN_DEMOS=0`` leaves the output out).
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -47,9 +53,59 @@ def _generate(app) -> None:
     out.mkdir(exist_ok=True)
     for script in sorted((ROOT / "demos").glob("*.py")):
         text = jupytext.writes(jupytext.read(script), fmt="md")
+        if os.environ.get("DOCS_RUN_DEMOS", "1") != "0":
+            text += _demo_section(script, out / "_output" / script.stem)
         target = out / (script.stem + ".md")
         if not target.exists() or target.read_text() != text:
             target.write_text(text)
+
+
+DEMO_CACHE = DOCS / "_build" / "demo-cache"
+
+
+def _demo_key(script: Path) -> str:
+    """A hash of the demo and of everything its results depend on in the repository (solver/, configs/)."""
+    h = hashlib.sha256(script.read_bytes())
+    for path in sorted([*(ROOT / "solver").rglob("*.py"), *(ROOT / "configs").glob("*.toml")]):
+        h.update(path.relative_to(ROOT).as_posix().encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _demo_run(script: Path) -> Path:
+    """The directory holding the demo's stdout.txt and charts: from the cache, or run now (a failure stops the
+    build with the demo's error)."""
+    run = DEMO_CACHE / f"{script.stem}-{_demo_key(script)}"
+    if (run / "stdout.txt").exists():
+        return run
+    for old in DEMO_CACHE.glob(f"{script.stem}-*"):
+        shutil.rmtree(old, ignore_errors=True)
+    run.mkdir(parents=True)
+    env = dict(os.environ, DEMO_OUTPUT=str(run), PYTHONPATH=str(ROOT), MPLBACKEND="Agg")
+    env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    res = subprocess.run([sys.executable, str(script)], cwd=run, env=env, capture_output=True, text=True, timeout=900)
+    if res.returncode != 0:
+        raise RuntimeError(f"demos/{script.name} failed (exit {res.returncode}):\n{res.stderr[-3000:]}")
+    (run / "stdout.part").write_text(res.stdout)
+    (run / "stdout.part").rename(run / "stdout.txt")  # the mark of a finished run
+    return run
+
+
+def _demo_section(script: Path, images: Path) -> str:
+    """The page's closing section: what the demo printed and the charts it drew (copied next to the page)."""
+    run = _demo_run(script)
+    shutil.rmtree(images, ignore_errors=True)
+    images.mkdir(parents=True)
+    lines = (run / "stdout.txt").read_text().rstrip("\n").splitlines()
+    if len(lines) > 80:
+        lines = lines[:40] + [f"... ({len(lines) - 80} lines left out) ..."] + lines[-40:]
+    text = ["", "## What it printed and drew", "",
+            f"Run when this site was built (`python demos/{script.name}`; kept until the demo or the solver changes).",
+            "", "```text", *lines, "```", ""]
+    for png in sorted(run.glob("*.png")):
+        shutil.copy2(png, images / png.name)
+        text += [f"![{png.stem}](_output/{script.stem}/{png.name})", ""]
+    return "\n".join(text)
 
 
 def _modules() -> str:

@@ -7,9 +7,12 @@ The same scenes, checks and results as ``python -m solver run``, without strings
     res = api.run(cfg)                        # in memory; api.run(cfg, "results/x") also writes the files
     res.series["contact_force"]               # one numpy array per timeseries.csv column, one entry a level
     res.fields["damage"]                      # the final level's fields at the mesh nodes (input order)
+    res.contact["bottom"]["pressure"]         # the contact profile of part bottom, a row a written level
 
 A change that a scene file would refuse raises the same one-line :class:`solver.errors.ConfigError`.
 ``api.run(cfg, tolerance=1e-2)`` plans mesh, degree and step as ``solver run --tolerance`` does.
+A sweep of the compliance, the material constants or the memory truncation compiles no new form (they enter the
+forms as ``fem.Constant``); the form compiler's build log stays off stderr unless ``api.compiler_output(True)``.
 Every rank of a communicator calls :func:`run` with the same scene; every rank gets the same
 series and the same (gathered) fields.
 """
@@ -24,12 +27,14 @@ import numpy as np
 from mpi4py import MPI
 
 from solver.config import Config, from_dict, load
-from solver.io.layout import API, ResultsDir, timeseries_columns
+from solver.io.layout import API, PROFILE_COLUMNS, ResultsDir, timeseries_columns
 from solver.io.xdmf import DolfinxRows, dolfinx_layout
-from solver.post.results import read_csv
+from solver.post.results import contact_levels, read_contact, read_csv
 from solver.post.results import read_results as read_dir
+from solver.run import formcache
+from solver.run.formcache import show_compiler_output as compiler_output
 
-__all__ = ["Config", "Results", "load", "read", "run", "scene"]
+__all__ = ["Config", "Results", "compiler_output", "load", "read", "read_contact", "run", "scene"]
 
 
 @dataclass
@@ -43,6 +48,9 @@ class Results:
     run (``model.u``, ``model.zeta``), for post-processing with dolfinx/UFL; None when read from files.
     ``plan``: what a tolerance chose (:class:`solver.run.accuracy.Plan`: ``degree``, ``order``, ``k``,
     ``summary()`` as in plan.json); None without a tolerance or when read from files.
+    ``contact``: the contact profile at every written level, per contact part (:func:`read_contact`'s arrays:
+    ``step`` and ``t`` a value a level; ``s``, ``x``, ``y``, ``z``, ``gap``, ``u_normal``, ``penetration``,
+    ``pressure`` a row a level, a column a node along the part); {} without contact.
     """
 
     series: dict[str, np.ndarray]
@@ -51,6 +59,7 @@ class Results:
     directory: Path | None = None
     model: Any = field(default=None, repr=False)
     plan: Any = field(default=None, repr=False)
+    contact: dict[str, dict[str, np.ndarray]] = field(default_factory=dict, repr=False)
 
     @property
     def columns(self) -> tuple[str, ...]:
@@ -88,11 +97,39 @@ def run(cfg: Config, output: str | Path | None = None, overwrite: bool = False, 
     if tolerance is not None:
         cfg = cfg.replace({"accuracy": {"tolerance": tolerance}}, label="tolerance")
     outdir = None if output is None else Path(output)
+    formcache.install()  # compiled forms kept in memory across the runs of a sweep, and compiled quietly
     start = launch(cfg, comm, outdir, overwrite, wording=API)
-    rows = run_model(start.model, outdir, on_step=on_step, sensors=start.sensors)
+    profile = _ProfileKeeper(start.model, on_step)
+    rows = run_model(start.model, outdir, on_step=profile.level, sensors=start.sensors)
     series = {c: np.array([r[c] for r in rows], dtype=float) for c in timeseries_columns(start.model, start.sensors)}
     points, fields = final_fields(start.model)
-    return Results(series, fields, points, outdir, start.model, start.plan)
+    return Results(series, fields, points, outdir, start.model, start.plan, profile.arrays())
+
+
+class _ProfileKeeper:
+    """The contact profile of every written level, kept in memory as contact.csv would hold it (every rank gets it)."""
+
+    def __init__(self, model: Any, on_step: Any) -> None:
+        from solver.run.stepper import writes_level
+
+        self.model, self.on_step, self.writes = model, on_step, writes_level
+        self.traces = model.mech.diagnostics.traces
+        self.levels: dict[tuple[int, str], dict[str, np.ndarray]] = {}
+
+    def level(self, row: dict) -> None:
+        time = self.model.cfg.time
+        if self.traces is not None and self.writes(row["step"], time.steps, self.model.cfg.output.every):
+            self.traces.update_normal()  # u_ν and the penetration of this level (the writer does the same)
+            parts = self.model.comm.bcast(self.traces.profile(), root=0)  # collective; rank 0 holds the rows
+            for name, rows in parts:
+                cols = dict(zip(PROFILE_COLUMNS[3:], rows.T))
+                cols["t"] = np.full(len(rows), row["t"])
+                self.levels[(row["step"], name)] = cols
+        if self.on_step is not None:
+            self.on_step(row)
+
+    def arrays(self) -> dict[str, dict[str, np.ndarray]]:
+        return contact_levels(self.levels) if self.levels else {}
 
 
 def read(directory: str | Path) -> Results:
@@ -108,7 +145,7 @@ def read(directory: str | Path) -> Results:
         if last in levels:
             v = levels[last]
             fields[name] = v[:, :dim] if name == "displacement" else (v[:, 0] if v.ndim == 2 and v.shape[1] == 1 else v)
-    return Results(series, fields, res["geometry"][:, :dim], directory)
+    return Results(series, fields, res["geometry"][:, :dim], directory, contact=read_contact(directory))
 
 
 def final_fields(model: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:

@@ -46,6 +46,7 @@ def _setup_logging(comm: MPI.Comm, verbose: bool) -> None:
     # the JIT's distutils resets the root level to INFO at every compile: filter at the handler
     for h in logging.getLogger().handlers:
         h.setLevel(logging.DEBUG if verbose else logging.WARNING)
+    formcache.show_compiler_output(verbose)
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -70,6 +70,51 @@ def test_in_memory_equals_files(comm, shared_tmp):
         assert np.array_equal(mem.fields[name], disk.fields[name])
         assert _rel(mem.fields[name], back.fields[name]) <= 1e-12, name
     assert np.array_equal(mem.points, back.points)
+    # the contact profile of every written level, in memory as in contact.csv (read back by read_contact)
+    assert mem.contact.keys() == back.contact.keys() == {"bottom"}
+    c, b = mem.contact["bottom"], back.contact["bottom"]
+    assert c["pressure"].shape == (5, 5) and np.array_equal(c["step"], [0, 1, 2, 3, 4])
+    assert np.array_equal(c["t"], back.series["t"]) and c.keys() == b.keys()
+    for k in c:
+        assert _rel(c[k], b[k]) <= 1e-12, k
+    assert np.array_equal(api.read_contact(shared_tmp / "r")["bottom"]["pressure"], b["pressure"])
+
+
+SWEEP = """
+import sys
+from solver import api
+from solver.run import formcache
+done = {"n": 0}
+compile_ = formcache._compile
+def counted(*a, **k):
+    done["n"] += 1
+    return compile_(*a, **k)
+formcache._compile = counted
+cfg = api.scene(%r)
+for mu in (1e-8, 2e-8, 4e-8):
+    res = api.run(cfg.replace({"boundary": {"bottom": {"mu": mu}}}))
+    print(mu, done["n"], res.series["contact_force"][-1], flush=True)
+"""
+
+
+@pytest.mark.serial
+@pytest.mark.slow
+def test_a_compliance_sweep_compiles_its_forms_once_and_says_nothing(tmp_path):
+    """Three compliances from Python in a fresh FFCx cache: the first run compiles every form, the next two none
+    (the compliance is a fem.Constant, not a number in the C code); stderr stays empty although the first compiled."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
+    res = subprocess.run([sys.executable, "-c", SWEEP % (SMALL,)], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    counts = [int(line.split()[1]) for line in res.stdout.splitlines()]
+    assert len(counts) == 3 and counts[0] > 0 and counts[2] == counts[0], res.stdout
+    forces = [float(line.split()[2]) for line in res.stdout.splitlines()]
+    assert len(set(forces)) == 3  # the compliance did change the runs
+    assert res.stderr == ""
 
 
 def test_study_in_a_loop_without_strings(comm):

@@ -62,3 +62,27 @@ def test_demos_are_jupytext_percent_scripts(demo):
     for kind, lines in cells:
         if kind == "markdown":
             assert all(not ln.strip() or ln.startswith("#") for ln in lines), lines
+
+
+def test_the_docs_pages_show_a_demos_output_and_charts_and_keep_them(tmp_path, monkeypatch):
+    """docs/conf.py runs a demo once, puts what it printed and the charts it drew at the end of its page, and takes
+    them from its cache on the next build (the demo is not run again) until the demo changes."""
+    pytest.importorskip("jupytext", reason="the docs extra is not installed")
+    sys.path.insert(0, str(ROOT / "docs"))
+    try:
+        import conf
+    finally:
+        sys.path.remove(str(ROOT / "docs"))
+    demo = tmp_path / "tiny.py"
+    counter = tmp_path / "runs"
+    demo.write_text("import os, pathlib\n"
+                    f"p = pathlib.Path({str(counter)!r}); p.write_text(p.read_text() + 'x' if p.exists() else 'x')\n"
+                    "print('hello from the demo')\n"
+                    "pathlib.Path(os.environ['DEMO_OUTPUT'], 'chart.png').write_bytes(b'png')\n")
+    monkeypatch.setattr(conf, "DEMO_CACHE", tmp_path / "cache")
+    page = conf._demo_section(demo, tmp_path / "images")
+    assert "hello from the demo" in page and "![chart](_output/tiny/chart.png)" in page
+    assert (tmp_path / "images" / "chart.png").read_bytes() == b"png"
+    assert conf._demo_section(demo, tmp_path / "images") == page and counter.read_text() == "x"  # from the cache
+    demo.write_text(demo.read_text() + "print('changed')\n")
+    assert "changed" in conf._demo_section(demo, tmp_path / "images") and counter.read_text() == "xx"

@@ -27,6 +27,8 @@ from typing import Any, ClassVar, Protocol
 import numpy as np
 import ufl
 
+from solver.laws.constants import constant
+
 
 class LawTable(Protocol):
     """A scene's contact table as a law reads it (config implements it; errors name ``boundary.NAME.key``)."""
@@ -191,7 +193,7 @@ class LinearLaw(PiecewiseLinearLaw):
         return self.mu
 
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        return ufl.max_value(r, 0.0) / self.mu
+        return ufl.max_value(r, 0.0) / constant(r, self.mu)
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
         return np.maximum(r, 0.0) * (1.0 / self.mu)
@@ -228,7 +230,7 @@ class PowerLaw(ContactLaw):
         return (0.0,) if self.exponent == 1.0 else ()  # p'(0+) = c for m = 1, 0 for m > 1
 
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        return self.coefficient * ufl.max_value(r, 0.0) ** self.exponent
+        return constant(r, self.coefficient) * ufl.max_value(r, 0.0) ** self.exponent
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
         # the exponent as an array: numpy's array ** array loop for every m (a scalar m = 2 would take x * x)
@@ -279,7 +281,8 @@ class LimitedPenetrationLaw(PiecewiseLinearLaw):
         return self.mu
 
     def ufl(self, r: ufl.core.expr.Expr) -> ufl.core.expr.Expr:
-        return ufl.max_value(r, 0.0) / self.mu + ufl.max_value(r - self.depth, 0.0) / self.mu_stiff
+        return (ufl.max_value(r, 0.0) / constant(r, self.mu)
+                + ufl.max_value(r - constant(r, self.depth), 0.0) / constant(r, self.mu_stiff))
 
     def pressure(self, r: np.ndarray) -> np.ndarray:
         return np.maximum(r, 0.0) * (1.0 / self.mu) + np.maximum(r - self.depth, 0.0) * (1.0 / self.mu_stiff)

@@ -15,6 +15,7 @@ import numpy as np
 import ufl
 
 from solver.errors import ConfigError
+from solver.laws.constants import constant
 
 __all__ = ["MemoryIntegrand", "pairs", "truncate"]
 
@@ -57,15 +58,16 @@ class MemoryIntegrand:
     def stress(self, eps) -> ufl.core.expr.Expr:
         """A eps (UFL)."""
         d = eps.ufl_shape[0]
-        return self.lame_lambda * ufl.tr(eps) * ufl.Identity(d) + 2.0 * self.lame_mu * eps
+        return constant(eps, self.lame_lambda) * ufl.tr(eps) * ufl.Identity(d) + 2.0 * constant(eps, self.lame_mu) * eps
 
     def ufl(self, eps, zeta) -> ufl.core.expr.Expr:
         """zeta Phi_L(A eps) (UFL), the d x d integrand."""
-        return zeta * truncate(self.stress(eps), self.L)
+        return zeta * truncate(self.stress(eps), constant(eps, self.L))
 
     def ufl_out_of_plane(self, eps, zeta) -> ufl.core.expr.Expr:
         """H_33 = zeta Phi_L(lambda tr(eps)) of plane strain (UFL), eps the in-plane strain."""
-        return zeta * ufl.max_value(-self.L, ufl.min_value(self.L, self.lame_lambda * ufl.tr(eps)))
+        L = constant(eps, self.L)
+        return zeta * ufl.max_value(-L, ufl.min_value(L, constant(eps, self.lame_lambda) * ufl.tr(eps)))
 
     # --- numpy: the same on compact components, into caller-owned buffers
 

@@ -17,6 +17,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
+from solver.laws.constants import constant
 from solver.laws.contact import LinearLaw
 from solver.mesh.geometry import Geometry
 from solver.physics.gap import gap_function, gap_values  # noqa: F401  (gap_values: re-exported)
@@ -97,7 +98,7 @@ class ContactTerm:
         # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
         # a law without a fixed stiffness (power: p'(r) = c m r^(m-1)) is left out
         stiff = [(p, p.contact_law.stiffness) for p in parts if p.contact_law.stiffness is not None]
-        self._normal_form = fem.form(sum(k * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
+        self._normal_form = fem.form(sum(constant(w, k) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
                                          for p, k in stiff)) if stiff else None
 
     def normal_stiffness(self, out: PETSc.Vec) -> None:

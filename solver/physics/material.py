@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import ufl
 
+from solver.laws.constants import constant
 from solver.laws.memory import truncate
 
 __all__ = ["elasticity", "lame", "out_of_plane_stress", "strain", "truncate", "von_mises", "von_mises_array"]
@@ -26,7 +27,7 @@ def strain(u) -> ufl.core.expr.Expr:
 
 def elasticity(eps, E: float, nu: float, model: str) -> ufl.core.expr.Expr:
     """A eps = lambda tr(eps) I + 2 mu eps."""
-    lam, mu = lame(E, nu, model)
+    lam, mu = (constant(eps, c) for c in lame(E, nu, model))  # a sweep of E or nu compiles nothing new
     d = eps.ufl_shape[0]
     return lam * ufl.tr(eps) * ufl.Identity(d) + 2.0 * mu * eps
 
@@ -34,7 +35,7 @@ def elasticity(eps, E: float, nu: float, model: str) -> ufl.core.expr.Expr:
 def out_of_plane_stress(eps, E: float, nu: float) -> ufl.core.expr.Expr:
     """(A eps)_33 in plane strain (eps_33 = 0): lambda (eps_11 + eps_22)."""
     lam, _ = lame(E, nu, "plane_strain")
-    return lam * ufl.tr(eps)
+    return constant(eps, lam) * ufl.tr(eps)
 
 
 def von_mises(tau, s33=None) -> ufl.core.expr.Expr:

@@ -7,8 +7,12 @@
 
 The pipeline is the one a user builds in the GUI: open ``solution.xdmf`` (reader ``Xdmf3ReaderS``), go to a time,
 Warp By Vector with ``displacement``, colour by a cell (or point) field, plus a scalar bar, a caption and the undeformed
-boundary in grey; then a 2-D camera fitting the body and SaveScreenshot. It prints the time values and the array names
-the reader found. This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
+boundary in grey (in 3-D: the surface's 30-degree feature edges); then a camera fitting the body (2-D: the x-y plane;
+3-D: from outside the contact face, read from ``contact.csv``, else from above a corner) and SaveScreenshot. It prints
+the time values and the array names the reader found. A contact field the run did not write into ``solution.xdmf``
+(``contact_pressure``, ``gap``, ``penetration``, ``u_normal``) is read from ``contact.csv`` instead (CSV Reader, Table To
+Points, Threshold on t, displaced as the body is): the nodes of Γ_C drawn as dots over the body in grey.
+This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ TITLES = {
     "elastic_stress": "|A eps(u)| (Frobenius)",
 }
 READERS = ("Xdmf3ReaderS", "Xdmf3ReaderT", "XDMFReader")
+# a contact field's column in contact.csv (solver/io/layout.py PROFILE_COLUMNS)
+CONTACT_COLUMNS = {"contact_pressure": "pressure", "gap": "gap", "penetration": "penetration", "u_normal": "u_normal"}
 MISSING_PYTHON = ("error: ParaView's Python modules are not installed, which pvbatch needs "
                   "(Debian: apt-get install python3-paraview)")
 
@@ -43,8 +49,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--field", default="von_mises_elastic", help="array to colour by (default: von_mises_elastic)")
     p.add_argument("--time", type=float, default=None, help="time to show (nearest written time; default: the last)")
     p.add_argument("--warp", type=float, default=None,
-                   help="displacement scale factor (default: automatic, the largest displacement at the shown time "
-                        "drawn as 10%% of the body size)")
+                   help="displacement scale factor (default: automatic, the largest displacement over the written "
+                        "levels (21 of a longer series) drawn as 10%% of the body size, as solver plot does)")
     p.add_argument("--output", default=None, help="PNG to write (default: RESULTS_DIR/paraview_<field>.png)")
     p.add_argument("--size", type=int, nargs=2, default=(1200, 800), metavar=("W", "H"), help="image size in pixels")
     p.add_argument("--colormap", default=None, help="ParaView colour preset (default: Turbo; Inferno for damage)")
@@ -143,6 +149,107 @@ def fit_camera(view, bounds: tuple[float, ...], size: tuple[int, int]) -> None:
     view.CameraParallelScale = scale
 
 
+def contact_face_centre(directory: str) -> tuple[float, float, float] | None:
+    """The mean point of the contact nodes of the first level written to ``directory``/contact.csv (None: no such
+    file, or no row): where the 3-D camera looks from."""
+    import csv
+
+    path = os.path.join(directory, "contact.csv")
+    if not os.path.isfile(path):
+        return None
+    sums, n, first = [0.0, 0.0, 0.0], 0, None
+    with open(path, newline="", encoding="utf-8") as fh:
+        for row in csv.DictReader(fh):
+            first = row["step"] if first is None else first
+            if row["step"] != first:
+                break
+            for i, k in enumerate("xyz"):
+                sums[i] += float(row[k])
+            n += 1
+    return tuple(v / n for v in sums) if n else None
+
+
+def _unit(v):
+    norm = math.sqrt(sum(c * c for c in v))
+    return [c / norm for c in v] if norm > 0 else list(v)
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def view_direction(bounds: tuple[float, ...], face: tuple[float, float, float] | None) -> tuple[list, list]:
+    """(unit vector from the body's centre to the camera, view-up) for a 3-D body: from outside the contact face
+    (the direction from the centre to ``face``), turned 45 degrees away from its normal so that the faces beside it show
+    too; without a contact face, from above the corner (1, -1, 1). View-up is +z unless the camera looks along z."""
+    centre = [(bounds[2 * i] + bounds[2 * i + 1]) / 2 for i in range(3)]
+    n = _unit([f - c for f, c in zip(face, centre)]) if face is not None else [0.0, 0.0, 0.0]
+    if not any(n):
+        d = _unit([1.0, -1.0, 1.0])
+    else:
+        k = min(range(3), key=lambda i: abs(n[i]))  # the axis least along n
+        e = [1.0 if i == k else 0.0 for i in range(3)]
+        a = _unit(_cross(n, e))
+        b = _cross(n, a)
+        d = _unit([n[i] + 0.8 * a[i] + 0.6 * b[i] for i in range(3)])
+    up = [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [0.0, 1.0, 0.0]
+    return d, up
+
+
+def fit_camera_3d(view, bounds: tuple[float, ...], face) -> None:
+    """A perspective camera from :func:`view_direction`, fitting the body with room for the caption and bar."""
+    d, up = view_direction(bounds, face)
+    centre = [(bounds[2 * i] + bounds[2 * i + 1]) / 2 for i in range(3)]
+    size = max(bounds[1] - bounds[0], bounds[3] - bounds[2], bounds[5] - bounds[4], 1e-12)
+    view.InteractionMode = "3D"
+    view.CameraParallelProjection = 0
+    view.CameraFocalPoint = centre
+    view.CameraPosition = [c + 4 * size * x for c, x in zip(centre, d)]
+    view.CameraViewUp = up
+    view.ResetCamera(False)
+    # back off from the fitted distance (a vtkCamera Zoom is overwritten by the view's properties at render)
+    fp, pos = list(view.CameraFocalPoint), list(view.CameraPosition)
+    view.CameraPosition = [f + (q - f) / 0.72 for f, q in zip(fp, pos)]
+
+
+def contact_points(pvs, directory: str, column: str, t: float, reader, has_u: bool, warp: float):
+    """The contact nodes of the level written at ``t`` in ``directory``/contact.csv as points carrying its columns,
+    displaced by ``warp`` times the body's displacement there (resampled from ``reader``); None if that level has no
+    row. The GUI pipeline: CSV Reader, Table To Points, Mask Points (a vertex each), Threshold on t, Resample With
+    Dataset, Append Attributes, Warp By Vector."""
+    table = pvs.CSVReader(registrationName="contact.csv", FileName=[os.path.join(directory, "contact.csv")])
+    points = pvs.TableToPoints(registrationName="ContactNodes", Input=table)
+    points.XColumn, points.YColumn, points.ZColumn = "x", "y", "z"
+    points.KeepAllDataArrays = 1
+    # a vertex per point: Threshold keeps cells, and only cells are drawn
+    verts = pvs.MaskPoints(registrationName="ContactVertices", Input=points)
+    verts.OnRatio, verts.MaximumNumberofPoints, verts.RandomSampling = 1, 2_000_000_000, 0
+    verts.GenerateVertices, verts.SingleVertexPerCell = 1, 1
+    level = pvs.Threshold(registrationName="ContactLevel", Input=verts)
+    level.Scalars = ["POINTS", "t"]
+    tol = 1e-9 * max(1.0, abs(t))
+    if hasattr(level, "LowerThreshold"):  # ParaView >= 5.10
+        level.LowerThreshold, level.UpperThreshold = t - tol, t + tol
+        level.ThresholdMethod = "Between"
+    else:
+        level.ThresholdRange = [t - tol, t + tol]
+    level.UpdatePipeline(t)
+    if level.GetDataInformation().GetNumberOfPoints() == 0:
+        return None
+    shown = level
+    if has_u:
+        # the displacement at the nodes (resampled from the body), appended to their columns (Resample With Dataset
+        # passing the columns itself crashes ParaView 5.11 here)
+        probe = pvs.ResampleWithDataset(registrationName="ContactDisplacement", SourceDataArrays=reader,
+                                        DestinationMesh=level)
+        both = pvs.AppendAttributes(registrationName="ContactNodesDisplaced", Input=[level, probe])
+        shown = pvs.WarpByVector(registrationName="ContactWarp", Input=both)
+        shown.Vectors = ["POINTS", "displacement"]
+        shown.ScaleFactor = warp
+    shown.UpdatePipeline(t)
+    return shown
+
+
 def _chosen_time(times: list, asked: float | None) -> float:
     """The written time to show: the last, or the one nearest to ``asked`` (with a note when not exact)."""
     if asked is None:
@@ -153,16 +260,31 @@ def _chosen_time(times: list, asked: float | None) -> float:
     return t
 
 
-def _warp(args: argparse.Namespace, reader, t: float, body: float, has_u: bool) -> float:
-    """The displacement's scale factor: the user's, or one that draws the largest displacement as ~10% of the body."""
+WARP_LEVELS = 21  # the levels the automatic warp looks at: all of a short series, 21 evenly spaced of a longer one
+
+
+def warp_levels(n: int) -> list[int]:
+    """Indices of the written levels (of ``n``) whose displacement sets the automatic warp: all up to 21, else 21
+    evenly spaced, first and last included (solver plot's plots.warp_levels: the same factor in both)."""
+    if n <= WARP_LEVELS:
+        return list(range(n))
+    return sorted({round(i * (n - 1) / (WARP_LEVELS - 1)) for i in range(WARP_LEVELS)})
+
+
+def _warp(args: argparse.Namespace, reader, times: list, t: float, body: float, has_u: bool) -> float:
+    """The displacement's scale factor: the user's, or one that draws the largest displacement over the written
+    levels (:func:`warp_levels`: 21 reads at most) as ~10% of the body, whatever the time shown: one factor for every
+    picture of a run, ``solver plot``'s."""
     if not has_u:
         print("note: no 'displacement' array: drawing the undeformed mesh")
         return 0.0
     if args.warp is not None:
         return args.warp
-    umax = max_abs_component(reader, t)
+    levels = [times[i] for i in warp_levels(len(times))] or [t]
+    umax = max(max_abs_component(reader, s) for s in levels)
+    reader.UpdatePipeline(t)
     warp = nice_warp(body, umax)
-    print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} at t = {fmt(t)} "
+    print(f"warp: {fmt(warp)} (automatic: largest displacement {umax:.3g} over {len(levels)} written levels "
           f"drawn as ~10% of the body size {body:.3g})")
     return warp
 
@@ -186,8 +308,9 @@ def _view(pvs, size: tuple[int, int], t: float):
     return view
 
 
-def _pipeline(pvs, reader, t: float, has_u: bool, warp: float):
-    """(the body warped by the displacement, the undeformed boundary's outline)."""
+def _pipeline(pvs, reader, t: float, has_u: bool, warp: float, solid: bool):
+    """(the body warped by the displacement, the undeformed body's outline: its boundary in 2-D, the 30-degree
+    feature edges of its surface in 3-D, whose surface has no boundary edges)."""
     shown = reader
     if has_u:
         shown = pvs.WarpByVector(registrationName="WarpByVector", Input=reader)
@@ -195,8 +318,9 @@ def _pipeline(pvs, reader, t: float, has_u: bool, warp: float):
         shown.ScaleFactor = warp
     shown.UpdatePipeline(t)
     outline = pvs.FeatureEdges(registrationName="Undeformed", Input=pvs.ExtractSurface(Input=reader))
-    outline.BoundaryEdges = 1
-    outline.FeatureEdges = 0
+    outline.BoundaryEdges = 0 if solid else 1
+    outline.FeatureEdges = 1 if solid else 0
+    outline.FeatureAngle = 30.0
     outline.NonManifoldEdges = 0
     outline.ManifoldEdges = 0
     outline.UpdatePipeline(t)
@@ -225,6 +349,24 @@ def _colour(pvs, args: argparse.Namespace, view, shown, assoc: str):
         disp.RescaleTransferFunctionToDataRange(False, True)
     pvs.GetOpacityTransferFunction(args.field).RescaleTransferFunction(lut.RGBPoints[0], lut.RGBPoints[-4])
     return disp, lut, ncomp
+
+
+def _points(pvs, args: argparse.Namespace, view, nodes, column: str, H: int):
+    """Show the contact nodes as dots coloured (unlit) by ``column``: (their display, the colour map)."""
+    disp = pvs.Show(nodes, view)
+    disp.SetRepresentationType("Points")
+    disp.PointSize = max(6, H // 90)
+    disp.RenderPointsAsSpheres = 0
+    disp.Ambient, disp.Diffuse = 1.0, 0.0
+    pvs.ColorBy(disp, ("POINTS", column))
+    lut = pvs.GetColorTransferFunction(column)
+    if not lut.ApplyPreset(args.colormap or "Turbo", True):
+        lut.ApplyPreset("Viridis (matplotlib)", True)
+    if args.range:
+        lut.RescaleTransferFunction(*args.range)
+    else:
+        disp.RescaleTransferFunctionToDataRange(False, True)
+    return disp, lut
 
 
 def _scalar_bar(pvs, view, disp, lut, field: str, ncomp: int, H: int) -> None:
@@ -276,10 +418,16 @@ def render(args: argparse.Namespace) -> int:
     print(f"point arrays: {arrays(reader.PointData)}")
     print(f"cell arrays: {arrays(reader.CellData)}")
     t = _chosen_time(times, args.time)
+    directory = os.path.dirname(os.path.abspath(given))
+    from_csv = None  # the contact.csv column drawn on the contact nodes, for a contact field solution.xdmf lacks
     if args.field in reader.CellData.keys():
         assoc = "CELLS"
     elif args.field in reader.PointData.keys():
         assoc = "POINTS"
+    elif args.field in CONTACT_COLUMNS and os.path.isfile(os.path.join(directory, "contact.csv")):
+        assoc, from_csv = "POINTS", CONTACT_COLUMNS[args.field]
+        print(f"note: {args.field} is not in solution.xdmf (output.fields): drawn from contact.csv's "
+              f"'{from_csv}' column at the contact nodes")
     else:
         names = list(reader.PointData.keys()) + list(reader.CellData.keys())
         print(f"error: --field {args.field}: not in the file (it has {', '.join(names)})", file=sys.stderr)
@@ -287,21 +435,38 @@ def render(args: argparse.Namespace) -> int:
     has_u = "displacement" in reader.PointData.keys()
     reader.UpdatePipeline(t)
     b = reader.GetDataInformation().GetBounds()
-    warp = _warp(args, reader, t, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]), has_u)
+    solid = b[5] - b[4] > 1e-12 * max(b[1] - b[0], b[3] - b[2], 1.0)
+    warp = _warp(args, reader, times, t, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]), has_u)
+    nodes = None if from_csv is None else contact_points(pvs, directory, from_csv, t, reader, has_u, warp)
+    if from_csv is not None and nodes is None:  # before the view is made: a view left at exit is an X error
+        print(f"error: --field {args.field}: contact.csv has no row at t = {fmt(t)}", file=sys.stderr)
+        return 2
     W, H = args.size
     view = _view(pvs, (W, H), t)
-    shown, outline = _pipeline(pvs, reader, t, has_u, warp)
-    disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
+    shown, outline = _pipeline(pvs, reader, t, has_u, warp, solid)
+    if from_csv is None:
+        disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
+        kind = "cell data" if assoc == "CELLS" else "point data"
+    else:
+        body = pvs.Show(shown, view)
+        body.ColorArrayName = ["POINTS", ""]
+        body.AmbientColor = body.DiffuseColor = [0.82, 0.82, 0.82]
+        disp, lut = _points(pvs, args, view, nodes, from_csv, H)
+        ncomp, kind = 1, "contact.csv, at the contact nodes"
     odisp = pvs.Show(outline, view)
     odisp.ColorArrayName = ["POINTS", ""]  # a solid colour (ColorBy(rep, None) fails on a 3-D outline: association NONE)
     odisp.AmbientColor = odisp.DiffuseColor = [0.45, 0.45, 0.45]
     odisp.LineWidth = 2.0
     _scalar_bar(pvs, view, disp, lut, args.field, ncomp, H)
-    kind = "cell data" if assoc == "CELLS" else "point data"
     _captions(pvs, view, (f"{TITLES.get(args.field, args.field)}  ({args.field}, {kind})",
-                          f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed boundary)"), H)
+                          f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed "
+                          f"{'edges' if solid else 'boundary'})"), H)
     wb = shown.GetDataInformation().GetBounds()
-    fit_camera(view, tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max))), (W, H))
+    bounds = tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max)))
+    if solid:
+        fit_camera_3d(view, bounds, contact_face_centre(directory))
+    else:
+        fit_camera(view, bounds, (W, H))
     out = args.output or os.path.join(os.path.dirname(given), f"paraview_{args.field}.png")
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     before = os.stat(out).st_mtime_ns if os.path.exists(out) else None

@@ -80,3 +80,26 @@ def read_profile(path: str | Path) -> dict[tuple[int, str], dict[str, np.ndarray
             if k not in ("step", "part"):
                 cols.setdefault(k, []).append(_number(path, n, k, v))
     return {key: {k: np.asarray(v) for k, v in cols.items()} for key, cols in out.items()}
+
+
+def contact_levels(profile: dict[tuple[int, str], dict[str, np.ndarray]]) -> dict[str, dict[str, np.ndarray]]:
+    """:func:`read_profile`'s levels stacked per part: {part: {"step": (levels,), "t": (levels,), column: (levels,
+    nodes)}} for the columns s, x, y, z, gap, u_normal, penetration, pressure, a row a written level in step order."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for part in sorted({name for _, name in profile}):
+        steps = sorted(step for step, name in profile if name == part)
+        levels = [profile[(step, part)] for step in steps]
+        cols = {"step": np.array(steps), "t": np.array([lv["t"][0] if len(lv["t"]) else np.nan for lv in levels])}
+        for k in levels[0]:
+            if k != "t":
+                cols[k] = np.array([lv[k] for lv in levels])
+        out[part] = cols
+    return out
+
+
+def read_contact(directory: str | Path) -> dict[str, dict[str, np.ndarray]]:
+    """A results directory's contact results (``contact.csv``), per contact part as arrays (:func:`contact_levels`):
+    ``read_contact("results/example1")["bottom"]["pressure"][-1]`` is the pressure along the part at the last written
+    level. {} for a scene without contact (no contact.csv); a damaged file is a :class:`ResultsError`."""
+    path = ResultsDir(Path(directory)).contact
+    return contact_levels(read_profile(path)) if path.exists() else {}

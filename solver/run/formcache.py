@@ -13,12 +13,23 @@ goes the usual way; once compiled and loaded, it is kept too.
 
 The first lookup of a module in a process opens its file by name (:func:`_direct`) instead of
 listing the cache directory, which a CLI run's start-up would otherwise pay once per module.
+
+A compile is quiet: FFCx's JIT builds the module with distutils, which logs four lines a module (the gcc command
+lines) to the root logger at INFO and sets the root logger's level to INFO, and ``import ffcx`` gave the root
+logger a stderr handler: 24 lines on stderr for a model's six contact forms. Records below WARNING logged during
+a compile are dropped, and what gcc writes to the process's stderr held back (written out if the compile fails),
+unless :func:`show_compiler_output` (``solver run --verbose``) asked for them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib.machinery
 import importlib.util
+import logging
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import ffcx.codegeneration.jit as ffcx_jit
@@ -72,10 +83,73 @@ def _loaded(cache_dir, module_name: str, object_names: list[str]):
     return objects, module
 
 
+_compile = ffcx_jit._compile_objects
+_show = {"compiler": False}
+compilations = {"count": 0}  # C modules compiled by this process (for tests and sweeps: a new value compiles none)
+
+
+def show_compiler_output(on: bool = True) -> None:
+    """Let the form compiler's build log (distutils' gcc command lines, FFCx's INFO) through to the logging
+    handlers (off by default)."""
+    _show["compiler"] = bool(on)
+
+
+class _BelowWarning(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno >= logging.WARNING
+
+
+def _compile_quietly(*args, **kwargs):
+    """FFCx's ``_compile_objects``, counted, its INFO and DEBUG records dropped and what gcc itself writes to the
+    process's stderr (its warnings on the generated C) held back, unless asked for; a failed compile lets through
+    what gcc said."""
+    compilations["count"] += 1
+    if _show["compiler"]:
+        return _compile(*args, **kwargs)
+    root, quiet = logging.getLogger(), _BelowWarning()
+    targets = [root, *root.handlers]  # the root logger's own records (distutils), and what reaches its handlers
+    for t in targets:
+        t.addFilter(quiet)
+    try:
+        with _stderr_held() as said:
+            try:
+                return _compile(*args, **kwargs)
+            except BaseException:
+                said.append(True)  # keep what gcc wrote: it says why
+                raise
+    finally:
+        for t in targets:
+            t.removeFilter(quiet)
+
+
+@contextlib.contextmanager
+def _stderr_held():
+    """File descriptor 2 into a temporary file for the block; its text is dropped, or written back to stderr when
+    the block appended to the yielded list (a failure)."""
+    flag: list[bool] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no stderr to hold (a closed descriptor): nothing to do
+        yield flag
+        return
+    with tempfile.TemporaryFile(mode="w+b") as fh:
+        os.dup2(fh.fileno(), 2)
+        try:
+            yield flag
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if flag:
+                fh.seek(0)
+                sys.stderr.write(fh.read().decode(errors="replace"))
+
+
 def install() -> None:
-    """Put the memo in front of FFCx's lookup and loader (once per process; idempotent)."""
+    """Put the memo in front of FFCx's lookup and loader, and the quiet compile (once per process; idempotent)."""
     ffcx_jit.get_cached_module = _lookup
     ffcx_jit._load_objects = _loaded
+    ffcx_jit._compile_objects = _compile_quietly
 
 
 def kept() -> int:

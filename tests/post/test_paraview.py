@@ -233,3 +233,55 @@ def test_paraview_readers_read_the_series(tmp_path, paraview, closed):
             assert r["gui_components"]["stress"] == ["XX", "YY", "ZZ", "XY", "YZ", "XZ"], reader
     # the written values are those in memory at the last level
     assert np.array_equal(ref["fields"]["damage"][-1], last["damage"].ravel()[np.argsort(scene.layout.node_keys)])
+
+
+def _script():
+    """paraview_script.py as a module (its camera helpers need no ParaView)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("paraview_script_under_test", spv.SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("face, normal", [((0.5, 0.5, 0.0), (0, 0, -1)), ((1.0, 0.5, 0.5), (1, 0, 0))])
+def test_the_3d_camera_looks_at_the_contact_face_from_outside(face, normal):
+    """The camera sits on the outer side of the contact face (45 degrees off its normal), not above z = 1."""
+    d, up = _script().view_direction((0, 1, 0, 1, 0, 1), face)
+    assert np.dot(d, normal) == pytest.approx(np.sqrt(0.5), rel=1e-2) and np.linalg.norm(d) == pytest.approx(1)
+    assert abs(np.dot(np.cross(d, up), np.cross(d, up))) > 0.1  # view-up not along the view
+
+
+def test_the_contact_face_centre_is_read_from_contact_csv(tmp_path):
+    (tmp_path / "contact.csv").write_text("step,t,part,s,x,y,z,gap,u_normal,penetration,pressure\n"
+                                          "0,0.0,bottom,0,0,0,0,0,0,0,0\n0,0.0,bottom,1,1,1,0,0,0,0,0\n"
+                                          "1,0.5,bottom,0,5,5,5,0,0,0,0\n")
+    assert _script().contact_face_centre(str(tmp_path)) == (0.5, 0.5, 0.0)
+    assert _script().contact_face_centre(str(tmp_path / "nowhere")) is None
+
+
+@pytest.mark.slow
+def test_a_contact_field_not_written_is_drawn_from_contact_csv(tmp_path, paraview):
+    """--field contact_pressure on a run whose output.fields left it out: the contact nodes coloured from
+    contact.csv (the pressure rises towards x = 1 in Example 1: the bar's range is the level's)."""
+    out = tmp_path / "r"
+    run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
+           "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.5"]
+    assert subprocess.run(run, cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    png = tmp_path / "p.png"
+    res = render(str(out), "--field", "contact_pressure", "--output", str(png), "--size", "600", "400")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "drawn from contact.csv's 'pressure' column" in res.stdout and png.stat().st_size > 10_000
+    res = render(str(out), "--field", "gap", "--time", "0.5", "--output", str(png))
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+
+
+def test_plot_and_paraview_warp_by_the_same_levels():
+    """solver plot and solver paraview take the automatic warp from the same written levels (the same factor)."""
+    from solver.post.plots import warp_levels
+
+    script = _script()
+    for n in (1, 2, 21, 22, 101, 1001):
+        assert script.warp_levels(n) == warp_levels(n)
+        assert warp_levels(n)[0] == 0 and warp_levels(n)[-1] == n - 1 and len(warp_levels(n)) == min(n, 21)
