@@ -124,6 +124,7 @@ def test_plot_outside_the_venv_names_the_python_to_use(monkeypatch, capsys, tmp_
     assert err.count("\n") == 1 and f"this Python ({sys.executable}) does not see" in err
     assert ".venv/bin/python -m solver plot" in err and "slim" not in err
 
+
 def _square(solid: bool) -> dict:
     """A unit square (triangles) or cube (tetrahedra) with the field x at the nodes and no displacement."""
     import pyvista as pv
