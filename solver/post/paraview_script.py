@@ -10,8 +10,8 @@ Warp By Vector with ``displacement``, colour by a cell (or point) field, plus a 
 boundary in grey; then a 2-D camera fitting the body and SaveScreenshot. It prints the time values and the array names
 the reader found. A scene with contact also has ``contact.xdmf`` (Γ_C as a facet mesh, solver/io/contact_series.py):
 it is drawn over the deformed body, warped alike, as a thick line (2-D) or its faces (3-D), coloured by
-``contact_pressure`` with a bar of its own, or by ``--field`` when that is one of its arrays and not the body's (the
-body is then light grey); ``--no-contact`` leaves it out. This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
+``contact_pressure`` with a bar of its own, or by ``--field`` when that is one of its arrays (the body is then light
+grey, see-through in 3-D); ``--no-contact`` leaves it out. This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
 """
 
 from __future__ import annotations
@@ -343,13 +343,14 @@ def render(args: argparse.Namespace) -> int:
         contact_names = list(contact_reader.PointData.keys())
         print(f"contact boundary ({CONTACT_FILE}) point arrays: {arrays(contact_reader.PointData)}")
         pvs.Delete(contact_reader)
-    on_contact = False  # the field is Γ_C's (contact.xdmf), not the body's
-    if args.field in reader.CellData.keys():
+    # a field of Γ_C's own dataset is drawn there (rather than as the body's vertex field, zero off Γ_C)
+    on_contact = args.field in contact_names and args.field != "displacement"
+    if on_contact:
+        assoc = "POINTS"
+    elif args.field in reader.CellData.keys():
         assoc = "CELLS"
     elif args.field in reader.PointData.keys():
         assoc = "POINTS"
-    elif args.field in contact_names:
-        assoc, on_contact = "POINTS", True
     else:
         names = list(reader.PointData.keys()) + list(reader.CellData.keys())
         names += [f"{n} ({CONTACT_FILE})" for n in contact_names if n != "displacement"]
@@ -368,6 +369,8 @@ def render(args: argparse.Namespace) -> int:
         disp.ColorArrayName = ["POINTS", ""]
         disp.AmbientColor = disp.DiffuseColor = [0.86, 0.86, 0.86]
         disp.Ambient, disp.Diffuse = 1.0, 0.0
+        if b[5] - b[4] > 0:  # 3-D: the body see-through, so that Γ_C shows from any side
+            disp.Opacity = 0.3
     else:
         disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
     contact = None

@@ -190,3 +190,41 @@ def test_paraview_readers_read_the_series(tmp_path, paraview, closed):
             assert r["gui_components"]["stress"] == ["XX", "YY", "ZZ", "XY", "YZ", "XZ"], reader
     # the written values are those in memory at the last level
     assert np.array_equal(ref["fields"]["damage"][-1], last["damage"].ravel()[np.argsort(scene.layout.node_keys)])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dim", [2, 3])
+def test_paraview_colours_the_contact_boundary_by_pressure(tmp_path, paraview, dim):
+    """contact.xdmf (Γ_C as a facet mesh) is opened beside solution.xdmf, and ``--field contact_pressure`` colours Γ_C
+    by the pressure over the light-grey body: the picture has the colour map's colours where Γ_C is, and ParaView
+    read the contact dataset's arrays and time values."""
+    out = tmp_path / "r"
+    scene = "configs/example1.toml" if dim == 2 else "configs/example1_3d.toml"
+    run = [sys.executable, "-m", "solver", "run", scene, "--output", str(out), "--no-progress", "--set", "time.T=0.2",
+           "--set", "time.k=0.1", "--set", "output.fields=['displacement']"]
+    run += ["--set", "mesh.nx=8", "--set", "mesh.ny=4"] if dim == 2 else ["--set", "mesh.nx=4", "--set", "mesh.ny=4",
+                                                                          "--set", "mesh.nz=4"]
+    res = subprocess.run(run, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    png = tmp_path / "contact.png"
+    res = render(str(out), "--field", "contact_pressure", "--output", str(png), "--size", "600", "400")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    arrays = re.search(r"contact boundary \(contact.xdmf\) point arrays: (.*)", res.stdout)
+    assert arrays, res.stdout
+    assert {"contact_pressure", "gap", "penetration", "normal_displacement", "displacement"} <= set(
+        re.findall(r"(\w+)\[\d+\]", arrays.group(1)))
+    assert "field contact_pressure (point data)" in res.stdout
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(png)[..., :3]
+    above_bar = img[: int(0.88 * img.shape[0])]  # the scalar bar sits in the bottom tenth
+    coloured = np.count_nonzero(above_bar.max(axis=2) - above_bar.min(axis=2) > 0.3)
+    if dim == 2:  # the light-grey body, and Γ_C a coloured line along its bottom
+        grey = np.all(np.abs(img - 0.86) < 0.01, axis=2)
+        assert grey.sum() > 0.2 * grey.size
+        assert coloured > 50
+    else:  # Γ_C's face seen through the see-through body
+        assert coloured > 0.1 * img.shape[0] * img.shape[1]
+    # without the contact dataset the same field is refused (it is not in solution.xdmf)
+    res = render(str(out), "--field", "contact_pressure", "--no-contact", "--output", str(png))
+    assert res.returncode == 2 and "not in the file" in res.stderr
