@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 from solver.post.results import read_csv, read_profile  # noqa: E402
 
 SCENES = ("example1", "example2", "example3", "hard", "load_cycle", "example1_3d", "column3d")
-QUICK = {"hard": ["mesh.nx=24", "mesh.ny=24", "time.T=0.2"], "load_cycle": ["time.T=1.0"],
+QUICK = {"hard": ["time.T=0.2"], "load_cycle": ["time.T=0.5"],
          "example1_3d": ["mesh.nx=6", "mesh.ny=6", "mesh.nz=6", "time.T=0.2"], "column3d": ["time.T=0.2"]}
 
 
