@@ -43,7 +43,7 @@ def measure(scene: str, quick: bool) -> dict:
             raise RuntimeError(f"{scene}: {res.stderr[-2000:]}")
         rows = {int(r["step"]): r for r in read_csv(out / "timeseries.csv")}
         profile = read_profile(out / "contact.csv")
-    worst, levels, peak_max, force_err = np.inf, set(), 0.0, 0.0
+    worst, levels, peak_max = np.inf, set(), 0.0
     by_level: dict[int, list] = {}
     for (step, _), cols in profile.items():
         by_level.setdefault(step, []).append(cols)

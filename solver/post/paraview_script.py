@@ -11,7 +11,8 @@ boundary in grey; then a 2-D camera fitting the body and SaveScreenshot. It prin
 the reader found. A scene with contact also has ``contact.xdmf`` (Γ_C as a facet mesh, solver/io/contact_series.py):
 it is drawn over the deformed body, warped alike, as a thick line (2-D) or its faces (3-D), coloured by
 ``contact_pressure`` with a bar of its own, or by ``--field`` when that is one of its arrays (the body is then light
-grey, see-through in 3-D); ``--no-contact`` leaves it out. This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
+grey, see-through in 3-D); ``--no-contact`` leaves it out. This file imports only ``paraview``: no solver package, no
+dolfinx, no numpy.
 """
 
 from __future__ import annotations
