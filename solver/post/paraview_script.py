@@ -282,7 +282,7 @@ def _contact_layer(pvs, args: argparse.Namespace, view, path: str, t: float, war
     disp = pvs.Show(shown, view)
     disp.SetRepresentationType("Surface")
     disp.Ambient, disp.Diffuse = 1.0, 0.0
-    disp.LineWidth = max(5.0, H / 90)
+    disp.LineWidth = max(5.0, H / 70)
     pvs.ColorBy(disp, ("POINTS", field))
     lut = pvs.GetColorTransferFunction(field)
     cmap = args.colormap if (main_bar and args.colormap) else "Turbo" if main_bar else "Inferno (matplotlib)"
