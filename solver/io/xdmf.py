@@ -225,7 +225,7 @@ class RowMap:
 
 def vector3(rows: np.ndarray) -> np.ndarray:
     """Rows of 1-3 components padded with zeros to 3 (what ParaView's Warp By Vector needs)."""
-    rows = rows.reshape(len(rows), -1)
+    rows = rows.reshape(len(rows), -1) if rows.size else rows.reshape(0, rows.shape[-1] if rows.ndim == 2 else 1)
     if rows.shape[1] == 3:
         return rows
     out = np.zeros((len(rows), 3), dtype=rows.dtype)
