@@ -247,7 +247,8 @@ def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdi
         if largest.total > plan.tolerance:
             log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
                      "mesh was too small); run again with a smaller tolerance")
-    log.info("results in %s (%s for ParaView, %s, %s)", outdir, layout.SOLUTION, layout.TIMESERIES, layout.CONFIG)
+    paraview = layout.SOLUTION + (f" and {layout.CONTACT_SERIES}" if (Path(outdir) / layout.CONTACT_SERIES).is_file() else "")
+    log.info("results in %s (%s for ParaView, %s, %s)", outdir, paraview, layout.TIMESERIES, layout.CONFIG)
 
 
 class _StopOnSignal:

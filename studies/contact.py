@@ -98,11 +98,11 @@ def figure(out: Path) -> None:
         model = build_model(from_dict(scene(n)), MPI.COMM_WORLD)
         Stepper(model).step(0)
         rows = dict(model.mech.diagnostics.traces.profile())["bottom"]
-        ax.plot(rows[:, 1], rows[:, 7], style, ms=4, label=f"λ_h, {n}×{n} mesh")
+        ax.plot(rows[:, 1], rows[:, 7], style, ms=4, label=f"p_h, {n}×{n} mesh")
     ax.set_xlabel("x on the bottom")
     ax.set_ylabel("contact pressure")
     ax.set_ylim(0.0, 1.15 * E * A)
-    ax.set_title("curved obstacle: λ_h against the closed form")
+    ax.set_title("curved obstacle: the reported pressure against the closed form")
     ax.legend()
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)

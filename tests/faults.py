@@ -5,7 +5,8 @@ For a child process: ``python tests/faults.py SPEC -m solver run ...`` (or ``SPE
 installs SPEC, then runs the module or script as ``python`` would.
 
 SPEC is ``action:stage:k``. ``action``: ``kill`` (SIGKILL this process) or ``enospc`` (raise OSError ENOSPC, as a
-full disk does). ``stage``, counted per process from 1:
+full disk does). ``stage``, counted per process from 1 in the body's series (solution.xdmf and its files; the writes of
+contact.xdmf are neither counted nor faulted):
 
 - ``data``: the k-th written level, after its first field is written (its chunk open, the level half done);
 - ``close``: the k-th chunk, just after its file was written (complete, not yet listed in the XML);
@@ -39,6 +40,10 @@ def install(spec: str) -> None:
         raise ValueError(f"fault {spec!r}: action kill|enospc, stage data|close|file")
     at, count = int(k), {"n": 0}
 
+    def body(path) -> bool:
+        """A file of the body's series: its chunks (fields/levels_*.h5) or its XML's temporary."""
+        return Path(path).name.startswith(("levels_", ".solution.xdmf"))
+
     def hit() -> bool:
         count["n"] += 1
         return count["n"] == at
@@ -47,7 +52,7 @@ def install(spec: str) -> None:
         add, write_dataset, armed = sx._Chunk.add, sx._write_dataset, {"on": False}
 
         def add_level(self, *args, **kw):
-            armed["on"] = hit()
+            armed["on"] = body(self.path) and hit()
             return add(self, *args, **kw)
 
         def write_one(group, name, *args, **kw):
@@ -62,7 +67,7 @@ def install(spec: str) -> None:
 
         def close_chunk(chunk):
             close(chunk)
-            if hit():
+            if body(chunk.path) and hit():
                 _fault(action, chunk.path)
 
         sx._close_chunk = close_chunk
@@ -70,7 +75,7 @@ def install(spec: str) -> None:
         write_file = sx._write_file
 
         def write_half(path, data):
-            if hit():
+            if body(path) and hit():
                 write_file(path, data[: len(data) // 2])
                 _fault(action, path)
             write_file(path, data)

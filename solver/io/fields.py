@@ -11,7 +11,8 @@ computed and interpolates linearly in between.
 The contact results ``contact_pressure`` (λ_h, the discrete problem's pressure), ``gap`` (g) and
 ``penetration`` (u_ν − g) are vertex fields of the whole mesh that are zero off Γ_C
 (:class:`solver.physics.contact_traces.ContactTraces`): one mesh in the file, so ParaView shows them
-over the deformed body with the rest, and its Extract Surface / threshold picks Γ_C.
+over the deformed body with the rest. Scenes with contact also write Γ_C as a dataset of its own,
+``contact.xdmf`` (:mod:`solver.io.contact_series`), whatever ``output.fields`` lists.
 
 In plane strain the out-of-plane stress sigma_33 = lambda tr eps(u) + M_33 (docs/model.md
 §2) is part of the stress: the von Mises values include it, and ``stress_zz`` /
@@ -29,6 +30,7 @@ from dolfinx.fem import petsc as fpetsc
 
 from solver.config import MaterialConfig, OutputConfig
 from solver.errors import OutputError, UsageError
+from solver.io.contact_series import ContactSeries
 from solver.io.xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
 from solver.physics.material import lame, strain, von_mises_array
 
@@ -137,11 +139,17 @@ class Outputs:
         mesh = model.geo.mesh
         self.d = mesh.geometry.dim
         self.series = None
+        self.contact = None  # contact.xdmf: Γ_C's own dataset (scenes with contact)
         plane_strain = material.model == "plane_strain" and self.d == 2
         traces = model.mech.diagnostics.traces
         self.names = [f for f in output.fields if (f != "damage" or model.damage is not None)
                       and (f not in PLANE_STRAIN_ONLY or plane_strain) and (f not in CONTACT_FIELDS or traces)]
-        if outdir is None or not self.names:
+        if outdir is None:
+            return
+        if traces is not None:
+            self.contact = self._open(lambda: ContactSeries(outdir, model.geo, traces, _vertex_values(model.u),
+                                                            output.precision, keep_until), keep_until)
+        if not self.names:
             return
         self.model = model
         self.rows = DolfinxRows(mesh)
@@ -154,10 +162,19 @@ class Outputs:
         self.stresses = (CellStresses(model, material) if set(self.names) - {"displacement", "damage", *CONTACT_FIELDS}
                          else None)
         specs = [FieldSpec(name, *KINDS[name]) for name in self.names]
+        self.series = self._open(lambda: XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, keep_until),
+                                 keep_until)
+
+    @staticmethod
+    def _open(make, keep_until: float | None):
+        """A series made by ``make``; its failure as a UsageError (a restart that cannot continue it) or OutputError."""
         try:
-            self.series = XDMFSeries(outdir, dolfinx_layout(mesh), specs, output.precision, keep_until)
+            return make()
         except SeriesError as exc:
             raise (UsageError(f"--restart: {exc}") if keep_until is not None else OutputError(str(exc))) from None
+
+    def _series(self) -> list:
+        return [s for s in (self.series, self.contact) if s is not None]
 
     def cell_fields(self) -> dict[str, np.ndarray]:
         """The chosen cell fields on the owned cells: stresses as d*d rows, von Mises values."""
@@ -179,6 +196,11 @@ class Outputs:
 
     def write(self, t: float) -> None:
         """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays)."""
+        if self.contact is not None:
+            try:
+                self.contact.write(t)
+            except SeriesError as exc:
+                raise OutputError(str(exc), exc.t) from None
         if self.series is None:
             return
         cells = self.cell_fields()
@@ -198,21 +220,22 @@ class Outputs:
 
     def flush(self) -> None:
         """List every level written so far in the series (before a checkpoint); raise a failed write's OutputError."""
-        if self.series is not None:
+        for series in self._series():
             try:
-                self.series.flush()
+                series.flush()
             except SeriesError as exc:
                 raise OutputError(str(exc), exc.t) from None
 
     def close(self, quiet: bool = False) -> None:
         """Finish the series; ``quiet``: a failure is not raised (another one is already on its way)."""
-        if self.series is None:
-            return
-        try:
-            self.series.close()
-        except SeriesError as exc:
-            if not quiet:
-                raise OutputError(str(exc), exc.t) from None
+        failure = None
+        for series in self._series():
+            try:
+                series.close()
+            except SeriesError as exc:
+                failure = failure or exc
+        if failure is not None and not quiet:
+            raise OutputError(str(failure), failure.t) from None
 
 
 def _vertex_values(f: fem.Function):

@@ -6,6 +6,8 @@ A results directory holds (docs/guide/outputs.md)::
     solution.xdmf          the XDMF series of the fields (solver/io/xdmf.py), its data in
     fields/mesh.h5         the mesh, written once
     fields/levels_*.h5     the levels, up to 100 a chunk
+    contact.xdmf           Γ_C as a facet mesh with the contact results (scenes with contact; solver/io/contact_series.py),
+                           its data in fields/contact_mesh.h5 and fields/contact_levels_*.h5
     timeseries.csv         one row a level (TIMESERIES_COLUMNS and the scene's own)
     contact.csv            the contact results along Γ_C at each written level (PROFILE_COLUMNS; scenes with contact)
     config.toml            the resolved scene
@@ -32,15 +34,16 @@ if TYPE_CHECKING:
 
 SOLUTION = "solution.xdmf"
 FIELDS = "fields"
-FIELD_PATTERNS = ("mesh.h5", "levels_*.h5")  # the series' data in fields/ (solver/io/xdmf.py)
+FIELD_PATTERNS = ("mesh.h5", "levels_*.h5", "contact_mesh.h5", "contact_levels_*.h5")  # the series' data in fields/
 TIMESERIES = "timeseries.csv"
 CONTACT = "contact.csv"
+CONTACT_SERIES = "contact.xdmf"
 CONFIG = "config.toml"
 CHECKPOINT = "checkpoint.h5"
 PLAN = "plan.json"
 PLAN_MESH = ("mesh.xdmf", "mesh.h5")
 # the files a run writes at the top of the directory, in the order --help lists them
-TOP_FILES = (SOLUTION, TIMESERIES, CONTACT, CONFIG, CHECKPOINT, PLAN, *PLAN_MESH)
+TOP_FILES = (SOLUTION, CONTACT_SERIES, TIMESERIES, CONTACT, CONFIG, CHECKPOINT, PLAN, *PLAN_MESH)
 
 TIMESERIES_COLUMNS = (
     "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
@@ -64,7 +67,8 @@ def timeseries_columns(model: Any, sensors: tuple = ()) -> tuple[str, ...]:
 
 def listing() -> str:
     """The files a run writes, as ``--help`` lists them."""
-    return ", ".join((SOLUTION, *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS), *TOP_FILES[1:]))
+    return ", ".join((SOLUTION, *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS[:2]), CONTACT_SERIES,
+                      *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS[2:]), *TOP_FILES[2:]))
 
 
 @dataclass(frozen=True)
@@ -76,6 +80,11 @@ class ResultsDir:
     @property
     def solution(self) -> Path:
         return self.path / SOLUTION
+
+    @property
+    def contact_series(self) -> Path:
+        """Γ_C's own dataset (contact.xdmf)."""
+        return self.path / CONTACT_SERIES
 
     @property
     def timeseries(self) -> Path:

@@ -102,14 +102,11 @@ class _Writers:
         self.profile = (ProfileWriter(files.contact, comm, traces, profile_until)
                         if files is not None and traces is not None else None)
         self.every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
-        self.traces = traces if outdir is not None else None
 
     def level(self, row: dict) -> None:
         """Write level ``row["step"]`` where it is written; its output time goes to the row."""
         n, t0 = row["step"], time.perf_counter()
         if writes_level(n, self.steps, self.every):
-            if self.traces is not None:
-                self.traces.update_normal()  # u_ν and the penetration (λ_h is the level's, from the diagnostics)
             self.out.write(row["t"])
             if self.profile is not None:
                 self.profile.write(n, row["t"])

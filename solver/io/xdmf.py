@@ -7,6 +7,9 @@ Layout of a results directory (``name`` = ``solution``)::
     fields/levels_000000.h5    /0000/<field>, /0001/<field>, ...: levels 0, 1, ... of the series
     fields/levels_000100.h5    /0000/<field> is level 100, ... (a chunk holds up to 100 levels, 64 MiB)
 
+Another series in the same directory (``name`` = ``contact``: Γ_C's facet mesh, :mod:`solver.io.contact_series`)
+prefixes its files with its name: ``fields/contact_mesh.h5``, ``fields/contact_levels_000000.h5``, ...
+
 A chunk file is named after the index of its first level in the series and holds one group per
 level (``NNNN`` = index - first) with one dataset per field, ``(rows,)`` or ``(rows, components)``.
 A chunk may hold fewer levels: it is also closed at every checkpoint (see *Crash safety*).
@@ -78,6 +81,7 @@ PRECISIONS = {"double": np.dtype("<f8"), "single": np.dtype("<f4")}
 KINDS = {"Scalar": 1, "Vector": 3, "Tensor6": 6}  # components in the file
 CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
+FACET_TYPES = {2: "Polyline", 3: "Triangle"}  # a boundary's facets (contact.xdmf): segments in 2-D, triangles in 3-D
 MAX_LEVELS_PER_CHUNK = 100
 CHUNK_BYTES = 64 * 2**20  # an open chunk is held in memory on rank 0
 SETTLE_CHUNKS = True  # fdatasync each closed chunk and drop its pages, in a thread (see _Settler)
@@ -193,6 +197,11 @@ class DolfinxRows:
                 raise ValueError(f"XDMF writer: {family} degree {degree} is not supported (P1 or DG0)")
         return self._maps[key][1]
 
+    def dofs(self, V) -> np.ndarray:
+        """The dof (block) of a scalar P1 or DG0 space at each owned node or cell."""
+        m = self._map(V)
+        return np.arange(m.n) if m.index is None else m.index[:: m.width] // m.width
+
     def rows(self, f) -> np.ndarray:
         """Values of ``f`` at this rank's owned nodes (P1) or cells (DG0), one row per node/cell."""
         return self._map(f.function_space).take(f.x.array)
@@ -216,7 +225,7 @@ class RowMap:
 
 def vector3(rows: np.ndarray) -> np.ndarray:
     """Rows of 1-3 components padded with zeros to 3 (what ParaView's Warp By Vector needs)."""
-    rows = rows.reshape(len(rows), -1)
+    rows = rows.reshape(len(rows), -1) if rows.size else rows.reshape(0, rows.shape[-1] if rows.ndim == 2 else 1)
     if rows.shape[1] == 3:
         return rows
     out = np.zeros((len(rows), 3), dtype=rows.dtype)
@@ -379,6 +388,7 @@ class XDMFSeries:
         self.path = self.directory / f"{name}.xdmf"
         self.tmp = self.directory / f".{name}.xdmf.tmp"  # not *.xdmf: no second file a user could open
         self.data_dir = self.directory / "fields"
+        self.prefix = "" if name == "solution" else f"{name}_"  # fields/mesh.h5, fields/contact_mesh.h5, ...
         self.grids: list[str] = []  # the XML of every listed level
         self.times: list[float] = []  # their times
         self.chunk: _Chunk | None = None  # rank 0: the chunk being filled (in memory)
@@ -445,14 +455,14 @@ class XDMFSeries:
         if keep_until is not None and self.path.exists():
             self._continue(keep_until)
         else:
-            for stale in self.data_dir.glob("levels_*.h5"):
+            for stale in self.data_dir.glob(f"{self.prefix}levels_*.h5"):
                 stale.unlink()
             self.path.unlink(missing_ok=True)
             self._write_mesh()
 
     def _write_mesh(self) -> None:
-        path = self.data_dir / "mesh.h5"
-        tmp = self.data_dir / ".mesh.h5.tmp"
+        path = self.data_dir / f"{self.prefix}mesh.h5"
+        tmp = self.data_dir / f".{self.prefix}mesh.h5.tmp"
         with h5py.File(tmp, "w") as h5:
             h5.create_dataset("geometry", data=self.points.astype("<f8"))
             h5.create_dataset("topology", data=self.cells.astype("<i8"))
@@ -460,7 +470,7 @@ class XDMFSeries:
 
     def _continue(self, keep_until: float) -> None:
         """Keep the levels with t <= keep_until of the existing series, check its mesh, drop unlisted chunks."""
-        mesh = self.data_dir / "mesh.h5"
+        mesh = self.data_dir / f"{self.prefix}mesh.h5"
         if not mesh.exists():
             raise SeriesError(f"{self.path} has no {mesh} (written by an older version?): cannot continue it")
         with h5py.File(mesh, "r") as h5:
@@ -483,7 +493,7 @@ class XDMFSeries:
             self.times.append(float(g.find("Time").get("Value")))
             referenced |= {item.text.strip().split(":", 1)[0] for item in g.iter("DataItem")}
         self._write_xml(self.grids)
-        for chunk in self.data_dir.glob("levels_*.h5"):  # a new chunk is named after len(kept): no clash
+        for chunk in self.data_dir.glob(f"{self.prefix}levels_*.h5"):  # a new chunk is named after len(kept): no clash
             if f"fields/{chunk.name}" not in referenced:
                 chunk.unlink()
 
@@ -541,7 +551,8 @@ class XDMFSeries:
         try:
             if self.chunk is None:
                 first = len(self.grids)
-                self.chunk = _Chunk(self.data_dir / f"levels_{first:06d}.h5", first, self._chunk_slots(), self.dtype)
+                self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, self._chunk_slots(),
+                                    self.dtype)
             self.chunk.add(t, fields, self._grid_format)
         except Exception as exc:
             try:
@@ -611,11 +622,11 @@ class XDMFSeries:
             f'      <Grid Name="{self.name}" GridType="Uniform">',
             f'        <Topology TopologyType="{lay.cell_type}" NumberOfElements="{nc}" NodesPerElement="{npc}">',
             f'          <DataItem Dimensions="{nc} {npc}" NumberType="Int" Precision="8" Format="HDF">'
-            "fields/mesh.h5:/topology</DataItem>",
+            f"fields/{self.prefix}mesh.h5:/topology</DataItem>",
             "        </Topology>",
             f'        <Geometry GeometryType="{"XYZ" if gdim == 3 else "XY"}">',
             f'          <DataItem Dimensions="{nn} {gdim}" NumberType="Float" Precision="8" Format="HDF">'
-            "fields/mesh.h5:/geometry</DataItem>",
+            f"fields/{self.prefix}mesh.h5:/geometry</DataItem>",
             "        </Geometry>",
             '        <Time Value="{t}"/>',
         ]
@@ -712,11 +723,13 @@ def read_series(path: str | Path, values: bool = True) -> dict:
 
 
 def _check_mesh(path: Path, points: np.ndarray, cells: np.ndarray) -> None:
-    """Nodes as rows of 2 or 3 finite coordinates; cells as triangles or tetrahedra naming existing nodes."""
+    """Nodes as rows of 2 or 3 finite coordinates; cells as segments (a boundary's, in 2-D), triangles or tetrahedra
+    naming existing nodes."""
     if points.ndim != 2 or points.shape[1] not in (2, 3) or not np.isfinite(points).all():
         raise ResultsError(path, f"geometry: {points.shape} coordinates, not finite rows of 2 or 3")
-    if cells.ndim != 2 or cells.shape[1] not in (3, 4) or len(cells) == 0:
-        raise ResultsError(path, f"topology: shape {cells.shape}, not rows of 3 (triangles) or 4 (tetrahedra) nodes")
+    if cells.ndim != 2 or cells.shape[1] not in (2, 3, 4) or len(cells) == 0:
+        raise ResultsError(path, f"topology: shape {cells.shape}, not rows of 2 (segments), 3 (triangles) or 4 "
+                                 "(tetrahedra) nodes")
     if cells.min() < 0 or cells.max() >= len(points):
         raise ResultsError(path, f"topology: node numbers {cells.min()}..{cells.max()} outside the {len(points)} nodes")
 

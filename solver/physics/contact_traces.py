@@ -1,22 +1,32 @@
-"""The contact results on Γ_C as fields (docs/contact.md): the pressure λ_h, the normal displacement, the gap
-and the penetration, in the traces on Γ_C of the degree-p Lagrange space (zero off Γ_C).
+"""The contact results on Γ_C as fields (docs/guide/contact.md): the pressure, the normal displacement, the gap and
+the penetration, as P1 functions that are nonzero on Γ_C only, recovered from the contact term's quadrature points.
 
-λ_h is the discrete problem's own pressure (as the estimator's :class:`estimator.ContactPressure`):
+The law acts at the points x_q where the contact term is integrated, with the exact gap: p_q = p(u_ν − g)(x_q).
+Each field is reported at a vertex i of Γ_C as the lumped-mass (row-sum) L² projection onto P1 of its values at
+those points:
 
-    (λ_h, ψ)_Γ_C = Σ_parts Σ_q p(u_ν − g)(x_q) ψ(x_q) w_q    for every trace ψ,
+    f_i = Σ_q φ_i(x_q) w_q f_q / m_i,    m_i = Σ_q φ_i(x_q) w_q = ∫_Γ_C φ_i ds,
 
-the compliance at the contact term's quadrature points. Taking ψ = Σ_i ψ_i = 1 on Γ_C gives
-∫_Γ_C λ_h ds = the contact force of the discrete equations, exactly (to the CG tolerance). u_ν is
-the same projection of u·ν (exact for P1 on a straight part, where u·ν is P1 itself), g is the gap at
-the trace's nodes, and the penetration u_ν − g. The boundary mass matrix is assembled and its Γ_C block
-factored once: an update is an assembly and a triangular solve pair on the Γ_C dofs.
+a weighted mean with nonnegative weights (the P1 hats are ≥ 0), so
+
+- the pressure is ≥ 0 by construction (a mean of the law's values), zero where no point in the vertex's
+  facets is in contact, and Σ_i m_i p_i = Σ_q w_q p_q: its integral with the lumped mass is the contact force
+  of the discrete equations, exactly;
+- u_ν and g are the means of u·ν and of the exact gap at the points, so u_ν − g is the mean of the
+  penetration r = u_ν − g where the law acts (not the interpolation error of the gap between the nodes);
+- the penetration reported is the mean of r₊ = max(r, 0) where that is positive (the vertex's pressure is then
+  positive: for the linear law p_i = r₊,i / μ), else the mean of r (≤ 0, a separation): a positive pressure
+  never sits beside a negative penetration.
+
+One boundary assembly a level (the three means share it); the gap's mean and m are assembled once. P2
+displacements are reported at the vertices (the recovery is onto P1 on Γ_C).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import ufl
-from dolfinx import fem, la
+from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -24,100 +34,97 @@ from petsc4py import PETSc
 from solver.config import BoundaryConfig
 from solver.mesh.geometry import Geometry
 from solver.physics.contact import compliance, penetration
-from solver.physics.gap import gap_function, gap_values
+from solver.physics.gap import gap_function
+
+
+def _assemble(form: fem.Form) -> PETSc.Vec:
+    """A vector form assembled, summed over ranks into the owned entries and copied to the ghosts."""
+    b = fpetsc.create_vector(form)
+    with b.localForm() as local:
+        local.set(0.0)
+    fpetsc.assemble_vector(b, form)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    b.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    return b
 
 
 class ContactTraces:
-    """λ_h, u_ν, g and u_ν − g on Γ_C as functions of the degree-p Lagrange space (:meth:`update` per level)."""
+    """The contact pressure, u_ν, g and the penetration on Γ_C as P1 functions (:meth:`update` per level)."""
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
                  pressure_floor: float = 0.0) -> None:
         mesh = geo.mesh
         self.geo, self.parts, self.comm = geo, parts, geo.comm
         self.pressure_floor = pressure_floor  # pressures within it of the peak (or all, below it) tie
-        p = u.function_space.ufl_element().degree()
-        S = fem.FunctionSpace(mesh, ("Lagrange", p))
+        S = fem.FunctionSpace(mesh, ("Lagrange", 1))
         self.pressure = fem.Function(S, name="contact_pressure")
         self.normal_displacement = fem.Function(S, name="normal_displacement")
         self.gap = fem.Function(S, name="gap")
         self.penetration = fem.Function(S, name="penetration")
-        lam, psi = ufl.TrialFunction(S), ufl.TestFunction(S)
-        n = ufl.FacetNormal(mesh)
+        self.x = S.tabulate_dof_coordinates()
         fdim = mesh.topology.dim - 1
-        x = S.tabulate_dof_coordinates()
-        self.x = x
         n_local = S.dofmap.index_map.size_local
+        self.n_local = n_local
         self.part_dofs = {}  # per part: its owned dofs
         for part in parts:
             dofs = fem.locate_dofs_topological(S, fdim, geo.facets(part.name))
-            self.gap.x.array[dofs] = gap_values(part, x[dofs])
             self.part_dofs[part.name] = dofs[dofs < n_local]
-        self.on = np.unique(np.concatenate([fem.locate_dofs_topological(S, fdim, geo.facets(q.name)) for q in parts]))
-        mass = sum(lam * psi * geo.ds(geo.tags[q.name], metadata={"quadrature_degree": 2 * p}) for q in parts)
-        A = fpetsc.assemble_matrix(fem.form(mass))
-        A.assemble()
-        # only the Γ_C block is factored: the rows off Γ_C are empty (the right-hand sides vanish there too); the
-        # whole matrix, with 1 on the diagonal off Γ_C, fills like a volume Laplacian (docs/developer/design-notes.md)
-        marker = fem.Function(S)  # the owned dofs on Γ_C: also those whose Γ_C facets are all on another rank
-        marker.x.array[self.on] = 1.0
-        marker.x.scatter_reverse(la.ScatterMode.add)
-        owned_on = np.flatnonzero(marker.x.array[:n_local]).astype(np.int32)
-        self.is_on = PETSc.IS().createGeneral(S.dofmap.index_map.local_to_global(owned_on).astype(PETSc.IntType),
-                                              comm=self.comm)
-        A_on = A.createSubMatrix(self.is_on, self.is_on)
-        A.destroy()
+        n = ufl.FacetNormal(mesh)
 
         def ds(q):
             return geo.ds(geo.tags[q.name], metadata={"quadrature_degree": degree})
 
-        self.rhs = {
-            self.pressure: fem.form(sum(compliance(penetration(u, n, gap_function(q, geo, degree)), q) * psi * ds(q)
-                                        for q in parts)),
-            self.normal_displacement: fem.form(sum(ufl.dot(u, n) * psi * ds(q) for q in parts)),
-        }
-        self.b = fpetsc.create_vector(self.rhs[self.pressure])
-        # factored once (the Γ_C block): each level's λ_h is one triangular solve pair
-        self.ksp = PETSc.KSP().create(self.comm)
-        self.ksp.setOperators(A_on)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("cholesky")
-        pc.setFactorSolverType("mumps" if self.comm.size > 1 else "petsc")
-        self.ksp.setUp()
-
-    def update_pressure(self) -> None:
-        """λ_h at the current u (every level: the peak-pressure columns read it)."""
-        self._solve(self.pressure)
+        psi = ufl.TestFunction(S)
+        self.mass = _assemble(fem.form(sum(psi * ds(q) for q in parts))).array_r.copy()
+        self.on = np.flatnonzero(self.mass > 0).astype(np.int32)  # local (ghosts too) vertices of Γ_C
+        self._inv_mass = 1.0 / self.mass[self.on]
+        gaps = {q.name: gap_function(q, geo, degree) for q in parts}
+        held = {name: fem.Constant(mesh, float(g)) if isinstance(g, (int, float)) else g  # 0 * psi would vanish
+                for name, g in gaps.items()}
+        self.gap.x.array[self.on] = _assemble(fem.form(sum(held[q.name] * psi * ds(q) for q in parts))).array_r[
+            self.on] * self._inv_mass
+        # the three means of a level in one assembly: p(r), r₊ and u·ν against the components of a P1 3-vector
+        S3 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3)
+        w = ufl.TestFunction(S3)
+        terms = []
+        for q in parts:
+            r = penetration(u, n, gaps[q.name])
+            terms.append((compliance(r, q) * w[0] + ufl.max_value(r, 0.0) * w[1] + ufl.dot(u, n) * w[2]) * ds(q))
+        self.form = fem.form(sum(terms))
+        self.b = fpetsc.create_vector(self.form)
 
     def update(self) -> None:
-        """λ_h and u_ν at the current u; the penetration u_ν − g on Γ_C (the levels that are written)."""
-        self._solve(self.pressure)
-        self.update_normal()
-
-    def update_normal(self) -> None:
-        """u_ν and the penetration u_ν − g on Γ_C at the current u (λ_h is left as it is)."""
-        self._solve(self.normal_displacement)
-        self.penetration.x.array[:] = 0.0
-        self.penetration.x.array[self.on] = self.normal_displacement.x.array[self.on] - self.gap.x.array[self.on]
-
-    def _solve(self, target: fem.Function) -> None:
-        """(target, psi)_{Γ_C} = the target's right-hand side (a triangular solve pair of the factored mass matrix)."""
-        with self.b.localForm() as local:
+        """The pressure, u_ν and the penetration at the current u (one boundary assembly)."""
+        b = self.b
+        with b.localForm() as local:
             local.set(0.0)
-        fpetsc.assemble_vector(self.b, self.rhs[target])
-        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        b_on, x_on = self.b.getSubVector(self.is_on), target.vector.getSubVector(self.is_on)
-        self.ksp.solve(b_on, x_on)
-        self.b.restoreSubVector(self.is_on, b_on)
-        target.vector.restoreSubVector(self.is_on, x_on)  # off Γ_C the target stays 0
-        target.x.scatter_forward()
+        fpetsc.assemble_vector(b, self.form)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        b.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with b.localForm() as local:
+            means = local.array_r.reshape(-1, 3)[self.on] * self._inv_mass[:, None]
+        pressure, plus, normal = means.T
+        self.pressure.x.array[self.on] = pressure
+        self.normal_displacement.x.array[self.on] = normal
+        self.penetration.x.array[self.on] = np.where(plus > 0, plus, normal - self.gap.x.array[self.on])
+
+    def lumped_force(self) -> float:
+        """Σ_i m_i p_i over Γ_C: the reported pressure's integral with the lumped mass (= the contact force)."""
+        owned = self.on[self.on < self.n_local]
+        return self.comm.allreduce(float(self.mass[owned] @ self.pressure.x.array[owned]), op=MPI.SUM)
+
+    def max_penetration(self) -> float:
+        """The largest reported penetration over Γ_C (-inf without Γ_C vertices anywhere)."""
+        owned = self.on[self.on < self.n_local]
+        return self.comm.allreduce(float(self.penetration.x.array[owned].max()) if len(owned) else -np.inf,
+                                   op=MPI.MAX)
 
     def peak(self) -> tuple[float, np.ndarray]:
-        """The largest λ_h over Γ_C and the point where it sits, the same on every rank and for any partition.
+        """The largest pressure over Γ_C and the point where it sits, the same on every rank and for any partition.
 
-        Points whose λ_h is within max(1e-9 |peak|, ``pressure_floor``) of the peak tie, and the first of them
-        (smallest x, then y, then z) is the one named: a flat top, or a level without contact (λ_h at round-off
-        everywhere), would otherwise name whichever point a partition's round-off puts first.
+        Points whose pressure is within max(1e-9 |peak|, ``pressure_floor``) of the peak tie, and the first of them
+        (smallest x, then y, then z) is the one named: a flat top, or a level without contact (0 everywhere),
+        would otherwise name whichever point a partition puts first.
         """
         owned = np.concatenate(list(self.part_dofs.values()))
         values = self.pressure.x.array[owned]
@@ -128,8 +135,8 @@ class ContactTraces:
         return value, np.array(min(self.comm.allgather(first)))
 
     def profile(self) -> list[tuple[str, np.ndarray]] | None:
-        """Per part on rank 0 (None elsewhere): rows (s, x, y, z, gap, u_ν, u_ν − g, λ_h) of its nodes in order
-        along the part (sorted by the coordinate that varies most; s the arc length from the first)."""
+        """Per part on rank 0 (None elsewhere): rows (s, x, y, z, gap, u_ν, penetration, pressure) of its vertices in
+        order along the part (sorted by the coordinate that varies most; s the arc length from the first)."""
         a = self.pressure.x.array
         local = {name: np.column_stack([self.x[d], self.gap.x.array[d], self.normal_displacement.x.array[d],
                                         self.penetration.x.array[d], a[d]]) for name, d in self.part_dofs.items()}

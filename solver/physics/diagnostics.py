@@ -1,5 +1,5 @@
 """Per-level diagnostics of the displacement: contact force and zone, penetration, the peak of the contact
-pressure λ_h and where it sits, ||eps(u)||, reactions.
+pressure (:class:`contact_traces.ContactTraces`) and where it sits, ||eps(u)||, reactions.
 
 Functionals of the contact term are integrated with the same facet rule as the term
 itself; ||eps(u)||_L2 from the strain at the memory points where the scene has memory (that
@@ -137,10 +137,13 @@ class DisplacementDiagnostics:
         return self._integral(self.length_form)
 
     def max_penetration(self) -> float:
-        """Largest u_nu - g over the contact quadrature points (0 without contact, NaN in 3-D: not computed)."""
+        """Largest u_nu - g: over the contact quadrature points in 2-D; in 3-D the largest penetration of the contact
+        profile (the traces' recovery from those points, :meth:`ContactTraces.max_penetration`); 0 without contact."""
         if self.points is not None:
             return self.points.max_penetration(self.u.x.array)
-        return float("nan") if self.has_contact else 0.0
+        if self.traces is not None:
+            return self.traces.max_penetration()
+        return 0.0
 
     def strain_norm(self) -> float:
         """||eps(u)||_L2: at the memory points where given, else sqrt(u . G u)."""
@@ -155,9 +158,7 @@ class DisplacementDiagnostics:
         return self.peak_columns + (self.reactions.columns if self.reactions is not None else ())
 
     def peak(self) -> dict[str, float]:
-        """max λ_h over Γ_C and its point, after updating λ_h (u_ν and the penetration are updated by the writer, at
-        the levels it writes: one solve a level instead of two)."""
-        self.traces.update_pressure()
+        """The largest contact pressure over Γ_C and its point (the traces as :meth:`row` updated them)."""
         value, x = self.traces.peak()
         if not self._warned and value > 0:
             self._warned = True
@@ -165,6 +166,8 @@ class DisplacementDiagnostics:
         return dict(zip(self.peak_columns, (value, *(float(c) for c in x[: self.geo.dim]))))
 
     def row(self) -> dict[str, float]:
+        if self.traces is not None:
+            self.traces.update()  # pressure, u_ν, penetration: one boundary assembly
         out = {"contact_force": self.contact_force(), "contact_length": self.contact_length(),
                "max_penetration": self.max_penetration(), "strain_norm": self.strain_norm()}
         if self.traces is not None:

@@ -9,9 +9,12 @@ The pipeline is the one a user builds in the GUI: open ``solution.xdmf`` (reader
 Warp By Vector with ``displacement``, colour by a cell (or point) field, plus a scalar bar, a caption and the undeformed
 boundary in grey (in 3-D: the surface's 30-degree feature edges); then a camera fitting the body (2-D: the x-y plane;
 3-D: from outside the contact face, read from ``contact.csv``, else from above a corner) and SaveScreenshot. It prints
-the time values and the array names the reader found. A contact field the run did not write into ``solution.xdmf``
-(``contact_pressure``, ``gap``, ``penetration``, ``u_normal``) is read from ``contact.csv`` instead (CSV Reader, Table To
-Points, Threshold on t, displaced as the body is): the nodes of Γ_C drawn as dots over the body in grey.
+the time values and the array names the reader found. A scene with contact also has ``contact.xdmf`` (Γ_C as a facet
+mesh, solver/io/contact_series.py): it is drawn over the deformed body, warped alike, as a thick line (2-D) or its
+faces (3-D), coloured by ``contact_pressure`` with a bar of its own, or by ``--field`` when that is one of its arrays
+(the body is then light grey, see-through in 3-D); ``--no-contact`` leaves it out. Results written before
+``contact.xdmf`` existed draw a contact field from ``contact.csv`` instead (CSV Reader, Table To Points, Threshold on
+t, displaced as the body is): the nodes of Γ_C as dots over the body in grey.
 This file imports only ``paraview``: no solver package, no dolfinx, no numpy.
 """
 
@@ -34,7 +37,12 @@ TITLES = {
     "displacement": "|displacement|",
     "stress": "|sigma| (Frobenius)",
     "elastic_stress": "|A eps(u)| (Frobenius)",
+    "contact_pressure": "contact pressure p(u_nu - g) on the contact boundary",
+    "penetration": "penetration u_nu - g on the contact boundary",
+    "gap": "gap g on the contact boundary",
+    "normal_displacement": "normal displacement u_nu on the contact boundary",
 }
+CONTACT_FILE = "contact.xdmf"
 READERS = ("Xdmf3ReaderS", "Xdmf3ReaderT", "XDMFReader")
 # a contact field's column in contact.csv (solver/io/layout.py PROFILE_COLUMNS)
 CONTACT_COLUMNS = {"contact_pressure": "pressure", "gap": "gap", "penetration": "penetration", "u_normal": "u_normal"}
@@ -59,6 +67,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--reader", choices=("auto", *READERS), default="auto",
                    help="XDMF reader (default: the first of Xdmf3ReaderS, Xdmf3ReaderT, XDMFReader that reads the file)")
     p.add_argument("--edges", action="store_true", help="draw the mesh edges")
+    p.add_argument("--no-contact", action="store_true",
+                   help="do not draw the contact boundary (contact.xdmf, written by scenes with contact)")
     return p.parse_args(argv)
 
 
@@ -399,6 +409,57 @@ def _captions(pvs, view, lines: tuple[str, str], H: int) -> None:
         cdisp.Color = [0.0, 0.0, 0.0]
 
 
+def _contact_layer(pvs, args: argparse.Namespace, view, path: str, t: float, warp: float, field: str, H: int,
+                   main_bar: bool):
+    """Γ_C (contact.xdmf) warped as the body, coloured by ``field``: a thick line in 2-D, its faces in 3-D. With
+    ``main_bar`` its bar is the picture's main one (bottom), else a second one on the right. Returns its display."""
+    _, reader = open_results(path, "auto")
+    shown = reader
+    if "displacement" in reader.PointData.keys() and warp:
+        shown = pvs.WarpByVector(registrationName="ContactWarp", Input=reader)
+        shown.Vectors = ["POINTS", "displacement"]
+        shown.ScaleFactor = warp
+    shown.UpdatePipeline(t)
+    disp = pvs.Show(shown, view)
+    disp.SetRepresentationType("Surface")
+    disp.Ambient, disp.Diffuse = 1.0, 0.0
+    disp.LineWidth = max(5.0, H / 70)
+    pvs.ColorBy(disp, ("POINTS", field))
+    lut = pvs.GetColorTransferFunction(field)
+    cmap = args.colormap if (main_bar and args.colormap) else "Turbo" if main_bar else "Inferno (matplotlib)"
+    lut.ApplyPreset(cmap, True)
+    if main_bar and args.range:
+        lut.RescaleTransferFunction(*args.range)
+    else:
+        disp.RescaleTransferFunctionToDataRange(False, True)
+    if main_bar:
+        _scalar_bar(pvs, view, disp, lut, field, 1, H)
+    else:
+        bar = pvs.GetScalarBar(lut, view)
+        bar.Title = f"{field} (contact boundary)"
+        bar.ComponentTitle = ""
+        bar.Orientation = "Vertical"
+        bar.WindowLocation = "Any Location"
+        bar.Position = [0.9, 0.2]
+        bar.ScalarBarLength = 0.55
+        bar.ScalarBarThickness = max(12, H // 50)
+        bar.TitleFontSize = bar.LabelFontSize = max(12, H // 50)
+        bar.TitleColor = bar.LabelColor = [0.0, 0.0, 0.0]
+        bar.AutomaticLabelFormat = 0
+        bar.LabelFormat = bar.RangeLabelFormat = "%-#.3g"
+        bar.Visibility = 1
+        disp.SetScalarBarVisibility(view, True)
+    return disp
+
+
+def _lift_towards_camera(view, disp, size: float) -> None:
+    """Move a display a little towards the camera (no change in a parallel projection's picture): Γ_C's faces
+    coincide with the body's and would otherwise fight them in the depth buffer."""
+    d = [p - f for p, f in zip(view.CameraPosition, view.CameraFocalPoint)]
+    norm = math.sqrt(sum(c * c for c in d)) or 1.0
+    disp.Position = [1e-3 * size * c / norm for c in d]  # the actor's translation
+
+
 def render(args: argparse.Namespace) -> int:
     """Build the pipeline, print what the reader found, save the PNG; 0 on success, 2 on bad input."""
     start = _time.perf_counter()
@@ -419,8 +480,19 @@ def render(args: argparse.Namespace) -> int:
     print(f"cell arrays: {arrays(reader.CellData)}")
     t = _chosen_time(times, args.time)
     directory = os.path.dirname(os.path.abspath(given))
-    from_csv = None  # the contact.csv column drawn on the contact nodes, for a contact field solution.xdmf lacks
-    if args.field in reader.CellData.keys():
+    contact_path = os.path.join(directory, CONTACT_FILE)
+    contact_names = []
+    if not args.no_contact and os.path.isfile(contact_path):
+        _, contact_reader = open_results(contact_path, "auto")
+        contact_names = list(contact_reader.PointData.keys())
+        print(f"contact boundary ({CONTACT_FILE}) point arrays: {arrays(contact_reader.PointData)}")
+        pvs.Delete(contact_reader)
+    # a field of Γ_C's own dataset is drawn there (rather than as the body's vertex field, zero off Γ_C)
+    on_contact = args.field in contact_names and args.field != "displacement"
+    from_csv = None  # older results without contact.xdmf: the contact.csv column drawn on the contact nodes
+    if on_contact:
+        assoc = "POINTS"
+    elif args.field in reader.CellData.keys():
         assoc = "CELLS"
     elif args.field in reader.PointData.keys():
         assoc = "POINTS"
@@ -430,6 +502,7 @@ def render(args: argparse.Namespace) -> int:
               f"'{from_csv}' column at the contact nodes")
     else:
         names = list(reader.PointData.keys()) + list(reader.CellData.keys())
+        names += [f"{n} ({CONTACT_FILE})" for n in contact_names if n != "displacement"]
         print(f"error: --field {args.field}: not in the file (it has {', '.join(names)})", file=sys.stderr)
         return 2
     has_u = "displacement" in reader.PointData.keys()
@@ -444,7 +517,17 @@ def render(args: argparse.Namespace) -> int:
     W, H = args.size
     view = _view(pvs, (W, H), t)
     shown, outline = _pipeline(pvs, reader, t, has_u, warp, solid)
-    if from_csv is None:
+    lut, ncomp = None, 1
+    if on_contact:  # the body in light grey under Γ_C coloured by the field
+        disp = pvs.Show(shown, view)
+        disp.SetRepresentationType("Surface With Edges" if args.edges else "Surface")
+        disp.ColorArrayName = ["POINTS", ""]
+        disp.AmbientColor = disp.DiffuseColor = [0.86, 0.86, 0.86]
+        disp.Ambient, disp.Diffuse = 1.0, 0.0
+        if solid:  # 3-D: the body see-through, so that Γ_C shows from any side
+            disp.Opacity = 0.3
+        kind = f"point data, {CONTACT_FILE}"
+    elif from_csv is None:
         disp, lut, ncomp = _colour(pvs, args, view, shown, assoc)
         kind = "cell data" if assoc == "CELLS" else "point data"
     else:
@@ -452,21 +535,29 @@ def render(args: argparse.Namespace) -> int:
         body.ColorArrayName = ["POINTS", ""]
         body.AmbientColor = body.DiffuseColor = [0.82, 0.82, 0.82]
         disp, lut = _points(pvs, args, view, nodes, from_csv, H)
-        ncomp, kind = 1, "contact.csv, at the contact nodes"
+        kind = "contact.csv, at the contact nodes"
+    contact = None
+    if contact_names:
+        contact = _contact_layer(pvs, args, view, contact_path, t, warp,
+                                 args.field if on_contact else "contact_pressure", H, main_bar=on_contact)
     odisp = pvs.Show(outline, view)
     odisp.ColorArrayName = ["POINTS", ""]  # a solid colour (ColorBy(rep, None) fails on a 3-D outline: association NONE)
     odisp.AmbientColor = odisp.DiffuseColor = [0.45, 0.45, 0.45]
     odisp.LineWidth = 2.0
-    _scalar_bar(pvs, view, disp, lut, args.field, ncomp, H)
-    _captions(pvs, view, (f"{TITLES.get(args.field, args.field)}  ({args.field}, {kind})",
-                          f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed "
-                          f"{'edges' if solid else 'boundary'})"), H)
+    if not on_contact:
+        _scalar_bar(pvs, view, disp, lut, args.field, ncomp, H)
+    line2 = f"t = {fmt(t)}, displacement x {fmt(warp)}  (grey: undeformed {'edges' if solid else 'boundary'})"
+    if contact is not None and not on_contact:
+        line2 += "; contact boundary: contact_pressure"
+    _captions(pvs, view, (f"{TITLES.get(args.field, args.field)}  ({args.field}, {kind})", line2), H)
     wb = shown.GetDataInformation().GetBounds()
     bounds = tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max)))
     if solid:
         fit_camera_3d(view, bounds, contact_face_centre(directory))
     else:
         fit_camera(view, bounds, (W, H))
+    if contact is not None:
+        _lift_towards_camera(view, contact, max(b[1] - b[0], b[3] - b[2], b[5] - b[4]))
     out = args.output or os.path.join(os.path.dirname(given), f"paraview_{args.field}.png")
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     before = os.stat(out).st_mtime_ns if os.path.exists(out) else None

@@ -40,7 +40,8 @@ def test_every_file_a_run_writes_is_known_and_overwrite_removes_them_all(comm, s
 
 def test_the_writers_use_the_layouts_names():
     assert checkpoint.NAME == layout.CHECKPOINT
-    assert layout.listing().split(", ") == ["solution.xdmf", "fields/mesh.h5", "fields/levels_*.h5", "timeseries.csv",
+    assert layout.listing().split(", ") == ["solution.xdmf", "fields/mesh.h5", "fields/levels_*.h5", "contact.xdmf",
+                                            "fields/contact_mesh.h5", "fields/contact_levels_*.h5", "timeseries.csv",
                                             "contact.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
                                             "mesh.h5"]
 

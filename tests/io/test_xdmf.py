@@ -409,3 +409,13 @@ def test_killed_inside_a_write_then_restarted(tmp_path, stage, at, listed, nproc
     referenced = {i.text.split(":")[0] for i in ET.parse(xdmf).getroot().iter("DataItem")}
     assert {f"fields/{p.name}" for p in (out / "fields").iterdir()} == referenced  # the unlisted chunk removed
     assert sorted(p.name for p in out.iterdir()) == ["fields", "solution.xdmf"]  # and the temporary XML
+
+
+def test_vector3_of_no_rows():
+    """A rank that owns none of a series' nodes (Γ_C's in contact.xdmf, on 2 ranks of a 4 x 4 mesh) writes zero rows:
+    they reshape to (0, 3) instead of failing on that rank alone (the others then waited for it)."""
+    from solver.io.xdmf import vector3
+
+    assert vector3(np.zeros((0, 2))).shape == (0, 3)
+    assert vector3(np.zeros((0, 3))).shape == (0, 3)
+    assert np.array_equal(vector3(np.ones((2, 2))), [[1, 1, 0], [1, 1, 0]])

@@ -263,12 +263,14 @@ def test_the_contact_face_centre_is_read_from_contact_csv(tmp_path):
 
 @pytest.mark.slow
 def test_a_contact_field_not_written_is_drawn_from_contact_csv(tmp_path, paraview):
-    """--field contact_pressure on a run whose output.fields left it out: the contact nodes coloured from
-    contact.csv (the pressure rises towards x = 1 in Example 1: the bar's range is the level's)."""
+    """--field contact_pressure on results without contact.xdmf (written before it existed) whose output.fields
+    left it out: the contact nodes coloured from contact.csv (the pressure rises towards x = 1 in Example 1: the
+    bar's range is the level's)."""
     out = tmp_path / "r"
     run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
            "--set", "mesh.nx=6", "--set", "mesh.ny=6", "--set", "time.k=0.5"]
     assert subprocess.run(run, cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    (out / "contact.xdmf").unlink()
     png = tmp_path / "p.png"
     res = render(str(out), "--field", "contact_pressure", "--output", str(png), "--size", "600", "400")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
@@ -285,3 +287,42 @@ def test_plot_and_paraview_warp_by_the_same_levels():
     for n in (1, 2, 21, 22, 101, 1001):
         assert script.warp_levels(n) == warp_levels(n)
         assert warp_levels(n)[0] == 0 and warp_levels(n)[-1] == n - 1 and len(warp_levels(n)) == min(n, 21)
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dim", [2, 3])
+def test_paraview_colours_the_contact_boundary_by_pressure(tmp_path, paraview, dim):
+    """contact.xdmf (Γ_C as a facet mesh) is opened beside solution.xdmf, and ``--field contact_pressure`` colours Γ_C
+    by the pressure over the light-grey body: the picture has the colour map's colours where Γ_C is, and ParaView
+    read the contact dataset's arrays and time values."""
+    out = tmp_path / "r"
+    scene = "configs/example1.toml" if dim == 2 else "configs/example1_3d.toml"
+    run = [sys.executable, "-m", "solver", "run", scene, "--output", str(out), "--no-progress", "--set", "time.T=0.2",
+           "--set", "time.k=0.1", "--set", "output.fields=['displacement']"]
+    run += ["--set", "mesh.nx=8", "--set", "mesh.ny=4"] if dim == 2 else ["--set", "mesh.nx=4", "--set", "mesh.ny=4",
+                                                                          "--set", "mesh.nz=4"]
+    res = subprocess.run(run, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    png = tmp_path / "contact.png"
+    res = render(str(out), "--field", "contact_pressure", "--output", str(png), "--size", "600", "400")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    arrays = re.search(r"contact boundary \(contact.xdmf\) point arrays: (.*)", res.stdout)
+    assert arrays, res.stdout
+    assert {"contact_pressure", "gap", "penetration", "normal_displacement", "displacement"} <= set(
+        re.findall(r"(\w+)\[\d+\]", arrays.group(1)))
+    assert "field contact_pressure (point data, contact.xdmf)" in res.stdout
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(png)[..., :3]
+    above_bar = img[: int(0.88 * img.shape[0])]  # the scalar bar sits in the bottom tenth
+    coloured = np.count_nonzero(above_bar.max(axis=2) - above_bar.min(axis=2) > 0.3)
+    if dim == 2:  # the light-grey body, and Γ_C a coloured line along its bottom
+        grey = np.all(np.abs(img - 0.86) < 0.01, axis=2)
+        assert grey.sum() > 0.2 * grey.size
+        assert coloured > 50
+    else:  # Γ_C's face seen through the see-through body
+        assert coloured > 0.1 * img.shape[0] * img.shape[1]
+    # without the contact dataset the same field is drawn from contact.csv at the contact nodes
+    res = render(str(out), "--field", "contact_pressure", "--no-contact", "--output", str(png))
+    assert res.returncode == 0 and "drawn from contact.csv's 'pressure' column" in res.stdout, res.stderr[-2000:]
+    res = render(str(out), "--field", "nothing", "--output", str(png))
+    assert res.returncode == 2 and "not in the file" in res.stderr and "(contact.xdmf)" in res.stderr
