@@ -28,6 +28,8 @@ from solver.solvers.newton import NewtonSolver
 # Newton's iterations on a level before auto hands it over (of solver.max_it): a level Newton has not solved in 8
 # is one whose active set keeps changing (the measurements: docs/model.md §4)
 NEWTON_ITERATIONS = 8
+# ... and the number of iterations in a row, each raising ||F||, after which it hands the level over at once
+GROWTH_STEPS = 2
 
 
 class AutoSolver(DisplacementMethod):
@@ -60,10 +62,13 @@ class AutoSolver(DisplacementMethod):
         u, core = self.newton.problem.u, self.newton.core
         u.vector.copy(self._start)
         f0 = core.factorizations
+        core.test.growth_limit = GROWTH_STEPS
         try:
             return self.newton.solve(scale)
         except DisplacementSolveError as exc:
             failed = exc
+        finally:
+            core.test.growth_limit = None
         self._start.copy(u.vector)  # the level again, from its start
         u.x.scatter_forward()
         self.switched_at = self.levels - 1
