@@ -13,7 +13,9 @@ the step through K in the full space (condensed.py).
 
 :class:`Reduced` evaluates j_B and C_BB by facet assembly; :class:`PointReduced` (2-D) by sparse products at the
 contact term's quadrature points, with the exact line search over the kinks of the piecewise quadratic E and a
-first active set predicted from the last two levels: v + PREDICT (v - v_prev).
+first active set predicted from the last two levels: v + PREDICT (v - v_prev). A level that starts with no point in
+contact (a first contact, or the return after a lift-off) takes continuation.py's compliance path on v first: the
+contact term scaled to its stiffness ratios (RATIOS), STAGE_ITERATIONS steps each, then the level's own law.
 """
 
 from __future__ import annotations
