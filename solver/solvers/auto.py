@@ -6,8 +6,9 @@ pays two or three solves with K per level. Where the zone moves by many points p
 cycles between active sets and its damped fallback takes tens of iterations, each a factorization of K + C, while
 newton_condensed solves those levels on the contact dofs with K's one factorization (measured: docs/model.md §4).
 So a run starts with Newton, without its fallback and with at most NEWTON_ITERATIONS iterations a level, and at
-the first level Newton does not solve (a cycle of active sets, no convergence, a failed linear solve) that level is
-solved again from its start by the take-over method, and so is every later one. The switch depends on the iterates
+the first level Newton does not solve (a cycle of active sets, no convergence, a failed linear solve, or GROWTH_STEPS
+iterations in a row each raising ||F||: a Newton that has started to diverge) that level is solved again from its
+start by the take-over method, and so is every later one. The switch depends on the iterates
 only, never on timings: the same scene takes the same path on every machine.
 
 The take-over is newton_condensed where it applies, else newton_energy (the registry's fallback, methods.py); both
@@ -28,6 +29,8 @@ from solver.solvers.newton import NewtonSolver
 # Newton's iterations on a level before auto hands it over (of solver.max_it): a level Newton has not solved in 8
 # is one whose active set keeps changing (the measurements: docs/model.md §4)
 NEWTON_ITERATIONS = 8
+# ... and the number of iterations in a row, each raising ||F||, after which it hands the level over at once
+GROWTH_STEPS = 2
 
 
 class AutoSolver(DisplacementMethod):
@@ -60,10 +63,13 @@ class AutoSolver(DisplacementMethod):
         u, core = self.newton.problem.u, self.newton.core
         u.vector.copy(self._start)
         f0 = core.factorizations
+        core.test.growth_limit = GROWTH_STEPS
         try:
             return self.newton.solve(scale)
         except DisplacementSolveError as exc:
             failed = exc
+        finally:
+            core.test.growth_limit = None
         self._start.copy(u.vector)  # the level again, from its start
         u.x.scatter_forward()
         self.switched_at = self.levels - 1

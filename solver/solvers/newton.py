@@ -78,6 +78,10 @@ class NewtonTest:
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:
         self.rtol, self.max_it, self.cycles, self.contact = rtol, max_it, cycles, contact
         self.scale = 1.0  # the level's force scale (:meth:`start_level`)
+        # where set (auto's Newton, which has a take-over): a run of this many iterations each raising ||F|| stops
+        # the solve (DIVERGED_DTOL); None: no such test
+        self.growth_limit: int | None = None
+        self._last, self._grown = np.inf, 0
 
     def start_level(self, scale: float) -> None:
         """A new level, whose force scale is ``scale`` (||F|| <= rtol * scale)."""
@@ -95,6 +99,10 @@ class NewtonTest:
             return R.CONVERGED_SNORM_RELATIVE
         if it >= self.max_it:
             return R.DIVERGED_MAX_IT
+        self._grown = self._grown + 1 if (it > 0 and fnorm > self._last) else 0
+        self._last = fnorm
+        if self.growth_limit is not None and self._grown >= self.growth_limit:
+            return R.DIVERGED_DTOL
         if self.cycles.watching and it > 0 and self.cycles.revisited(self.contact.active_set_at()):
             return DIVERGED_CYCLE
         return R.ITERATING

@@ -13,7 +13,9 @@ the step through K in the full space (condensed.py).
 
 :class:`Reduced` evaluates j_B and C_BB by facet assembly; :class:`PointReduced` (2-D) by sparse products at the
 contact term's quadrature points, with the exact line search over the kinks of the piecewise quadratic E and a
-first active set predicted from the last two levels: v + PREDICT (v - v_prev).
+first active set predicted from the last two levels: v + PREDICT (v - v_prev). A level that starts with no point in
+contact (a first contact, or the return after a lift-off) takes continuation.py's compliance path on v first: the
+contact term scaled to its stiffness ratios (RATIOS), STAGE_ITERATIONS steps each, then the level's own law.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from solver.physics.displacement import DisplacementProblem
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.condensation import Condensation
 from solver.solvers.contact_dofs import contact_block
+from solver.solvers.continuation import RATIOS, STAGE_ITERATIONS, STIFF
 from solver.solvers.damped_newton import illinois_root
 from solver.solvers.energy_newton import FREE_STEPS
 from solver.solvers.point_contact import PointContact
@@ -154,30 +157,61 @@ class PointReduced(Reduced):
         cond.u0.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         with cond.u0.localForm() as local:
             pc.level(local.array_r)
-        a, S = cond.u0_B, cond.S
         v = self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local])
+        self.start = v
+        history: list[float] = []
+        r = pc.NB @ v + pc.c
+        if not pc.state(r).any():  # a first contact (no point in contact at the start)
+            scales = self._path_scales()
+        else:
+            scales = ()
+        if scales:
+            W = pc.W
+            try:
+                for s in scales:
+                    pc.W = W * s
+                    v, _ = self._iterate(v, history, STAGE_ITERATIONS, predict=False)
+            finally:
+                pc.W = W
+            self.state = None
+        v, snorm = self._iterate(v, history, settings.max_it * 8, predict=not scales)
+        return history, v, snorm
+
+    def _path_scales(self) -> tuple[float, ...]:
+        """The compliance path's factors of the contact term (continuation.py's, on the reduced problem): the
+        largest over the points of the contact's stiffness W p'(0+) times the point's compliance (N_B S N_B^T)_qq,
+        R; the stages' s = ratio / R for ratio in RATIOS, where R > STIFF (else none)."""
+        pc = self.points
+        compliance = np.einsum("ij,ij->i", pc.NB @ self.cond.S, pc.NB.toarray())
+        R = float(np.max(pc.W * np.nan_to_num(pc.inv_mu.astype(float)) * compliance, initial=0.0))
+        return tuple(ratio / R for ratio in RATIOS) if R > STIFF else ()
+
+    def _iterate(self, v: np.ndarray, history: list[float], limit: int, predict: bool) -> tuple[np.ndarray, float]:
+        """The active-set iteration from v, at most ``limit`` steps (class docstring); appends ||F|| before each
+        step taken to ``history``; returns the last v and the norm of the last step."""
+        cond, settings, pc = self.cond, self.settings, self.points
+        a, S = cond.u0_B, cond.S
         r = pc.NB @ v + pc.c
         state = pc.state(r)
         fnorm = self.fnorm(v - a + S @ pc.force(r))
-        if self.previous is not None and PREDICT > 0.0:  # the set the last two levels' motion leads to
+        if predict and self.previous is not None and PREDICT > 0.0:  # the set the last two levels' motion leads to
             state = pc.state(pc.NB @ (v + PREDICT * (v - self.previous)) + pc.c)
-        self.start = v
-        seen, history = [state.tobytes()], []
+        seen = [state.tobytes()]
         snorm = 0.0
         unorm = max(self.problem.u.vector.norm(), 1e-300)
         eye = np.eye(len(v))
-        for _ in range(settings.max_it * 8):
+        for _ in range(limit):
             self.state = state
             if fnorm <= settings.rtol * self.scale:
                 self.state = None
-                return history, v, snorm
+                return v, snorm
             Hp = v - a + S @ pc.piece_force(r, state)  # H of the set's quadratic piece (H itself on v's set)
             d = -np.linalg.solve(eye + S @ pc.jacobian(state), Hp)
             s = pc.NB @ d
             ry = r + s
             statey = pc.state(ry)
             if np.array_equal(statey, state):  # the step solves its piece and stays in it: _polish takes it
-                return history, v, snorm
+                return v, snorm
             history.append(fnorm)
             y = v + d
             fy = self.fnorm(y - a + S @ pc.force(ry))
@@ -192,6 +226,6 @@ class PointReduced(Reduced):
             snorm = float(np.linalg.norm(d))
             if snorm <= settings.rtol * unorm and self.step_test(v, d):
                 self.state = None
-                return history, v, snorm
+                return v, snorm
         self.state = None
-        return history, v, snorm
+        return v, snorm

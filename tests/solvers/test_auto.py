@@ -11,7 +11,9 @@ from solver.io import checkpoint
 from solver.io.results import run
 from solver.run.model import build_model
 from solver.run.stepper import Stepper
-from solver.solvers.auto import NEWTON_ITERATIONS, AutoSolver
+from solver.solvers.auto import GROWTH_STEPS, NEWTON_ITERATIONS, AutoSolver
+from solver.solvers.cycle_watch import ActiveSetCycleWatch
+from solver.solvers.newton import NewtonTest
 
 # test_energy_newton.py's scene: hard.toml with P2, where at t = 0.45 plain Newton cycles and needs its fallback
 CYCLING = ["discretization.u_degree=2", "time.k=0.05", "time.T=0.45", "output.xdmf=false"]
@@ -47,7 +49,8 @@ def test_where_newton_solves_every_level_it_is_newton(comm):
 
 def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
     """The cycling scene: the levels are Newton's, to the bit, up to the first one Newton does not solve in
-    NEWTON_ITERATIONS (t = 0.3, where Newton takes 10; at t = 0.45 it cycles and needs the fallback); that level
+    NEWTON_ITERATIONS (t = 0.3, where Newton takes 10; at t = 0.45 it cycles and needs the fallback) or where its
+    residual grows GROWTH_STEPS iterations in a row (t = 0.25 here); that level
     and the later ones are newton_condensed's, with no damped fallback, the same solution as Newton + fallback
     with fewer factorizations, and K factored, not the K + C Newton leaves in K's storage."""
     model, rows = _run(comm, "auto", CYCLING)
@@ -55,8 +58,9 @@ def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
     assert solver.switched and solver.fallbacks == 0 and solver.takeover.reduced_iterations > 0
     ref_model, ref = _run(comm, "newton", CYCLING)
     assert ref_model.mech.solver.fallbacks >= 1
-    at = solver.switched_at  # the first level Newton does not solve in NEWTON_ITERATIONS (t = 0.3, 10 here)
-    assert at == next(i for i, r in enumerate(ref) if r["newton_iterations"] > NEWTON_ITERATIONS)
+    at = solver.switched_at  # the first level Newton does not solve in NEWTON_ITERATIONS (t = 0.3, 10 here), or
+    # an earlier one where its residual grew GROWTH_STEPS iterations in a row (t = 0.25)
+    assert 0 < at <= next(i for i, r in enumerate(ref) if r["newton_iterations"] > NEWTON_ITERATIONS)
     _same_levels(rows[:at], ref[:at], comm)
     assert sum(r["factorizations"] for r in rows) < sum(r["factorizations"] for r in ref)
     for a, b in zip(rows, ref, strict=True):
@@ -104,3 +108,15 @@ def test_a_restart_goes_on_with_the_method_it_had(comm, shared_tmp):
         else:  # two builds may partition differently: the norms of u
             for kind in (PETSc.NormType.NORM_2, PETSc.NormType.NORM_INFINITY):
                 assert fresh.u.vector.norm(kind) == pytest.approx(model.u.vector.norm(kind), rel=1e-10), n
+
+
+def test_a_residual_growing_in_a_row_stops_newton_only_where_asked(comm):
+    """NewtonTest's growth test (auto's Newton, which has a take-over): GROWTH_STEPS iterations in a row each raising
+    ||F|| stop the solve; a fall in between, or no limit set, goes on."""
+    test = NewtonTest(1e-12, 25, ActiveSetCycleWatch(comm, False), None)
+    R = PETSc.SNES.ConvergedReason
+    norms = [1.0, 0.5, 0.6, 0.4, 0.7, 0.9]
+    assert [test(it, 1.0, 1.0, f) for it, f in enumerate(norms)] == [R.ITERATING] * len(norms)
+    test.growth_limit = GROWTH_STEPS
+    reasons = [test(it, 1.0, 1.0, f) for it, f in enumerate(norms)]
+    assert reasons == [R.ITERATING] * (len(norms) - 1) + [R.DIVERGED_DTOL]

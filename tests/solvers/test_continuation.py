@@ -48,3 +48,17 @@ def test_path_only_for_a_stiff_contact(comm):
     limited = hertz_line(16)
     limited["boundary"]["bottom"].update(law="limited_penetration", mu=1e-6, depth=1e-7, mu_stiff=1e-10)
     assert ComplianceContinuation(build_model(from_dict(limited), comm).mech.problem).scales == ()  # linear law only
+
+
+def test_newton_condensed_first_contact_takes_the_path(comm, monkeypatch):
+    """newton_condensed's iteration on the contact dofs (reduced.PointReduced) takes the same path on a level that
+    starts with no point in contact: fewer iterations than from the plain start, the same solution."""
+    from solver.solvers.reduced import PointReduced
+
+    row = first_level(comm, 50, "newton_condensed")
+    monkeypatch.setattr(PointReduced, "_path_scales", lambda self: ())
+    plain = first_level(comm, 50, "newton_condensed")
+    print("newton_condensed iterations with the path", row["newton_iterations"], "without", plain["newton_iterations"])
+    assert row["newton_iterations"] < plain["newton_iterations"]
+    for key in ("contact_force", "contact_length", "strain_norm"):
+        assert row[key] == pytest.approx(plain[key], rel=1e-9), key
