@@ -119,7 +119,7 @@ class _ProfileKeeper:
     def level(self, row: dict) -> None:
         time = self.model.cfg.time
         if self.traces is not None and self.writes(row["step"], time.steps, self.model.cfg.output.every):
-            self.traces.update_normal()  # u_ν and the penetration of this level (the writer does the same)
+            # the traces as the level's diagnostics left them (as the contact.csv writer takes them)
             parts = self.model.comm.bcast(self.traces.profile(), root=0)  # collective; rank 0 holds the rows
             for name, rows in parts:
                 cols = dict(zip(PROFILE_COLUMNS[3:], rows.T))
