@@ -146,13 +146,13 @@ def _pruned(times: np.ndarray, A: np.ndarray, b: np.ndarray, s: np.ndarray, g_ab
 
 
 def _refined(t: np.ndarray, c: np.ndarray, s: np.ndarray, g_abs: np.ndarray, lags: np.ndarray, g: np.ndarray,
-             sign: float, tol: float) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """Fewer terms than (t, c) by moving the time constants (variable projection: log tau by nonlinear least squares,
-    the weights by linear least squares at each trial): m = 1, 2, ... (at most :data:`_REFINED_TERMS`) terms started
-    from the m largest weights; the first m that meets tol at every lag, or None. It finds a short Prony series given
+             sign: float, tol: float, most: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """A sum of at most ``most`` terms (and :data:`_REFINED_TERMS`) from (t, c) by moving the time constants (variable
+    projection: log tau by nonlinear least squares, the weights by linear least squares at each trial): m = 1, 2, ...
+    terms started from the m largest weights; the first m that meets tol at every lag, or None. It finds a short Prony series given
     as a table; it is too slow to pay for smooth mixtures (s^-alpha), which keep the pruned least-squares sum."""
     w = 1.0 / g_abs
-    for m in range(1, min(len(c), _REFINED_TERMS + 1)):
+    for m in range(1, min(most, _REFINED_TERMS) + 1):
         start = np.sort(t[np.argsort(np.abs(c))[::-1][:m]])
         const = not np.all(np.isfinite(start))
         x0 = np.log(start[np.isfinite(start)])
@@ -181,9 +181,11 @@ def _refined(t: np.ndarray, c: np.ndarray, s: np.ndarray, g_abs: np.ndarray, lag
     return None
 
 
-def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail: bool = False) -> KernelFit:
+def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail: bool = False,
+                        also: np.ndarray | None = None, hint: str = "a larger tolerance") -> KernelFit:
     """The exponential sum with the fewest terms found whose maximum relative error against ``exact`` (a function
-    of s) at ``lags`` is at most ``tolerance``, within :data:`MAX_TERMS`; raises :class:`KernelFitError` otherwise.
+    of s) at ``lags`` (and at the points ``also``) is at most ``tolerance``, within :data:`MAX_TERMS`; raises
+    :class:`KernelFitError` otherwise, whose reason ends with ``hint`` (what to change).
 
     Time constants log-spaced over [lag_min / 10, 10 lag_max] at 1, 2, 3, ... per decade (and, with
     ``constant_tail``, a constant term); at each density a nonnegative and a signed least-squares fit on the
@@ -191,6 +193,10 @@ def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail
     answer (the fewer terms of its two fits).
     """
     lags = np.asarray(lags, dtype=float)
+    pos = lags[lags > 0]
+    lo, hi = float(pos.min()), float(lags.max())
+    if also is not None and len(also):
+        lags = np.union1d(lags, np.asarray(also, dtype=float))
     g = np.asarray(exact(lags), dtype=float)
     if not np.all(np.isfinite(g)):
         raise KernelFitError("the kernel is not finite at every lag the run evaluates")
@@ -198,8 +204,6 @@ def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail
         raise KernelFitError("the kernel must keep one sign and not vanish at the lags the run evaluates "
                              f"({lags.min():.4g} to {lags.max():.4g}): its error is measured relative to |g|")
     sign = 1.0 if g[0] > 0 else -1.0
-    pos = lags[lags > 0]
-    lo, hi = float(pos.min()), float(lags.max())
     idx = np.unique(np.round(np.geomspace(1, len(lags), min(_FIT_SAMPLES, len(lags))) - 1).astype(int))
     s = lags[idx]
     if lags.min() == 0 and s[0] != 0:
@@ -208,6 +212,7 @@ def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail
     w = 1.0 / np.abs(g_s)
     b = np.ones(len(s))
     best: tuple[np.ndarray, np.ndarray, float] | None = None
+    near: tuple[np.ndarray, np.ndarray, float] = (np.empty(0), np.empty(0), math.inf)  # the smallest error reached
     reached = math.inf
     decades = math.log10(hi / lo) + 2
     for density in _DENSITIES:
@@ -225,22 +230,28 @@ def fit_exponential_sum(exact, lags: np.ndarray, tolerance: float, constant_tail
             reached = min(reached, err)
             if err <= tolerance and len(c) <= MAX_TERMS and (best is None or len(c) < len(best[1])):
                 best = (t, c, err)
+            if err < near[2]:
+                near = (t, c, err)
         if best is not None:
             break
         if len(times) > 2 * MAX_TERMS:
             break
+    if best is None and len(near[1]) > 1:  # no grid meets it: moving the time constants of the nearest may
+        best = _refined(near[0], near[1], s, np.abs(g_s), lags, g, sign, tolerance, len(near[1]))
     if best is None:
         raise KernelFitError(f"no sum of at most {MAX_TERMS} exponentials approximates the kernel to {tolerance:.0e} "
                              f"relative at the lags [{lo:.4g}, {hi:.4g}] the run evaluates (the best reached "
-                             f"{reached:.1e}; a table's kinks between rows limit it: a finer table or a larger "
-                             "tolerance)")
+                             f"{reached:.1e}; {hint})")
     t, c, err = best
-    fewer = _refined(t, c, s, np.abs(g_s), lags, g, sign, tolerance) if len(c) > 1 else None
+    fewer = _refined(t, c, s, np.abs(g_s), lags, g, sign, tolerance, len(c) - 1) if len(c) > 1 else None
     if fewer is not None:
         t, c, err = fewer
     order = np.argsort(t)
     prony = ExponentialSum(tuple(float(x) for x in c[order]), tuple(float(x) for x in t[order]))
     return KernelFit(prony, err, tolerance, float(lags.min()), hi)
+
+
+DENSE_POINTS = 4000  # log-spaced points of [lag_min, lag_max] a power kernel is checked at, between the lags too
 
 
 @dataclass(frozen=True)
@@ -249,6 +260,7 @@ class PowerKernel:
 
     coefficient: float
     exponent: float
+    hint = "a larger tolerance or fewer decades of lags (a larger k or a shorter T)"
 
     def __post_init__(self) -> None:
         self.check(self.coefficient, self.exponent)
@@ -272,12 +284,18 @@ class PowerKernel:
             raise KernelFitError("g(0) is infinite for a power kernel: the trapezoidal rules need it; use the left rule")
         return _cached(self, k, steps, tolerance, False)
 
+    def checked_between(self, lags: np.ndarray) -> np.ndarray:
+        """Where the sum is held to g besides the lags: a dense log grid of their range (g is known everywhere)."""
+        pos = lags[lags > 0]
+        return np.geomspace(pos.min(), pos.max(), DENSE_POINTS)
+
 
 @dataclass(frozen=True)
 class TabulatedKernel:
     """g given by rows (s, g(s)), s from 0 and increasing, linear in between and constant after the last row."""
 
     table: tuple[tuple[float, float], ...]
+    hint = "a finer table, whose kinks between rows limit any smooth sum, or a larger tolerance"
 
     def exact(self, s: np.ndarray) -> np.ndarray:
         rows = np.asarray(self.table, dtype=float)
@@ -287,9 +305,17 @@ class TabulatedKernel:
         """The exponential sum for a run of ``steps`` steps of k (``zero``: g(0) too, for the trapezoidal rules)."""
         return _cached(self, k, steps, tolerance, zero)
 
+    def checked_between(self, lags: np.ndarray) -> np.ndarray:
+        """Where the sum is held to g besides the lags: the rows in their range (the data). Between rows the table
+        is an interpolation whose kinks no smooth sum follows; a run with uniform steps never reads it there
+        unless its lags fall between rows, and then the lags themselves are checked."""
+        rows = np.asarray(self.table, dtype=float)[:, 0]
+        return rows[(rows >= lags.min()) & (rows <= lags.max())]
+
 
 @lru_cache(maxsize=32)
 def _cached(kernel: PowerKernel | TabulatedKernel, k: float, steps: int, tolerance: float, zero: bool) -> KernelFit:
     """One fit per kernel and run (the scene's check and the model's history ask for the same one)."""
-    return fit_exponential_sum(kernel.exact, run_lags(k, steps, zero), tolerance,
-                               constant_tail=isinstance(kernel, TabulatedKernel))
+    lags = run_lags(k, steps, zero)
+    return fit_exponential_sum(kernel.exact, lags, tolerance, constant_tail=isinstance(kernel, TabulatedKernel),
+                               also=kernel.checked_between(lags), hint=kernel.hint)
