@@ -50,6 +50,23 @@ def test_check_and_no_overwrite(tmp_path):
 
 
 @pytest.mark.parametrize("nproc", [1, 2])
+def test_a_power_kernel_run_reports_its_terms_and_error(tmp_path, nproc):
+    """The log's line and config.toml's first line give the sum of exponentials' terms and kernel error; the
+    scene written there reads back (the line is a comment)."""
+    out = tmp_path / "o"
+    res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL, "--set", "memory.kernel='power'",
+               "--set", "memory.exponent=0.5", "--set", "memory.coefficient=1.0", "--set", "time.k=0.25"], nproc)
+    assert res.returncode == 0, res.stderr
+    line = next(ln for ln in (res.stdout + res.stderr).splitlines() if ln.startswith("memory:"))
+    terms = int(line.split(" as ")[1].split()[0])
+    error = float(line.split("max relative kernel error ")[1].split()[0])
+    assert 1 <= terms <= 64 and error <= 1e-8 and "lags [0.25, 1]" in line
+    head = (out / "config.toml").read_text().splitlines()[0]
+    assert head.startswith("# memory.kernel = 'power' runs as") and f"{terms} exponential term(s)" in head
+    assert cli(["check", str(out / "config.toml")]).returncode == 0
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
 def test_solver_failure_stops_cleanly(tmp_path, nproc):
     """Example 3 unloads at t = 0.55 (6 Newton iterations at k = 0.05); with max_it = 4 and no fallback that step
     fails (the default damped fallback solves it: tests/solvers/test_damped_newton.py)."""

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import least_squares, nnls
 
 __all__ = ["MAX_TERMS", "ExponentialSum", "KernelFit", "KernelFitError", "PowerKernel", "TabulatedKernel",
            "fit_exponential_sum", "kernel_error", "run_lags"]
@@ -106,6 +105,8 @@ def _basis(s: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 
 def _solve(A: np.ndarray, b: np.ndarray, signed: bool) -> np.ndarray:
+    from scipy.optimize import nnls  # here, not at import: every scene reads this module, few fit a kernel (24 MiB)
+
     if signed:
         return np.linalg.lstsq(A, b, rcond=None)[0]
     return nnls(A, b, maxiter=50 * A.shape[1])[0]
@@ -151,6 +152,8 @@ def _refined(t: np.ndarray, c: np.ndarray, s: np.ndarray, g_abs: np.ndarray, lag
     projection: log tau by nonlinear least squares, the weights by linear least squares at each trial): m = 1, 2, ...
     terms started from the m largest weights; the first m that meets tol at every lag, or None. It finds a short Prony series given
     as a table; it is too slow to pay for smooth mixtures (s^-alpha), which keep the pruned least-squares sum."""
+    from scipy.optimize import least_squares  # here, not at import (see _solve)
+
     w = 1.0 / g_abs
     for m in range(1, min(most, _REFINED_TERMS) + 1):
         start = np.sort(t[np.argsort(np.abs(c))[::-1][:m]])
