@@ -26,6 +26,7 @@ from solver import __version__
 from solver.config import load
 from solver.config.accuracy import tolerance
 from solver.config.fields import Ctx
+from solver.config.memory import FITTED_KERNELS
 from solver.errors import InputError, Interrupted, SolveFailure, UsageError
 from solver.io import layout
 from solver.run import formcache
@@ -168,7 +169,10 @@ def cmd_check(args: argparse.Namespace, comm: MPI.Comm) -> int:
         physics.append("displacement(" + ",".join(moving) + ")")
     if cfg.contact:
         physics.append("contact(" + ",".join(f"{p.name}:{p.law}" for p in cfg.contact) + ")")
-    if cfg.memory.kernel != "none":
+    if cfg.memory.kernel in FITTED_KERNELS:
+        fit = cfg.memory.fit(cfg.time.k, cfg.time.steps)
+        physics.append(f"memory({cfg.memory.kernel} as {fit.terms} exponential terms, error {fit.error:.1e})")
+    elif cfg.memory.kernel != "none":
         physics.append(f"memory({cfg.memory.kernel})")
     if cfg.damage.enabled:
         physics.append("damage")
@@ -214,6 +218,9 @@ def cmd_run(args: argparse.Namespace, comm: MPI.Comm) -> int:
     cfg, model, plan, sensors = launched.config, launched.model, launched.plan, launched.sensors
     log.info("scene %s: %d cells, %d steps, %d process(es)", args.config, model.geo.num_cells(), cfg.time.steps,
              comm.size)
+    fit = model.history.kernel_fit if model.history is not None else None
+    if fit is not None:
+        log.info("memory: the %s kernel as %s", cfg.memory.kernel, fit.summary())
     bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
     stop = _StopOnSignal()
     try:

@@ -5,6 +5,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from conftest import ROOT
 from conftest import run_cli as cli
 
 from solver.post.results import read_csv, read_results
@@ -47,6 +48,27 @@ def test_check_and_no_overwrite(tmp_path):
     assert (out / "timeseries.csv").read_bytes() == before
     res = cli(["run", "configs/example1.toml", "--output", str(out), *SMALL, "--set", "time.k=0.25", "--overwrite"])
     assert res.returncode == 0 and (out / "timeseries.csv").read_bytes() != before
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_a_power_kernel_run_reports_its_terms_and_error(tmp_path, nproc):
+    """The log's line and config.toml's first line give the sum of exponentials' terms and kernel error; the
+    scene written there reads back (the line is a comment)."""
+    out = tmp_path / "o"
+    scene = tmp_path / "power.toml"
+    text = (ROOT / "configs/example1.toml").read_text()
+    old = 'kernel = "constant"   # G = zeta Phi_L(A eps(u))\nweights = [1.0]\n'
+    assert old in text
+    scene.write_text(text.replace(old, 'kernel = "power"\ncoefficient = 1.0\nexponent = 0.5\n'))
+    res = cli(["run", str(scene), "--output", str(out), *SMALL, "--set", "time.k=0.25"], nproc)
+    assert res.returncode == 0, res.stderr
+    line = next(ln for ln in (res.stdout + res.stderr).splitlines() if ln.startswith("memory:"))
+    terms = int(line.split(" as ")[1].split()[0])
+    error = float(line.split("max relative kernel error ")[1].split()[0])
+    assert 1 <= terms <= 64 and error <= 1e-8 and "lags [0.25, 1]" in line
+    head = (out / "config.toml").read_text().splitlines()[0]
+    assert head.startswith("# memory.kernel = 'power' runs as") and f"{terms} exponential term(s)" in head
+    assert cli(["check", str(out / "config.toml")]).returncode == 0
 
 
 @pytest.mark.parametrize("nproc", [1, 2])

@@ -6,15 +6,19 @@ import dataclasses
 from dataclasses import dataclass
 
 from solver.errors import ConfigError
+from solver.laws.kernels import KernelFit, KernelFitError, PowerKernel, TabulatedKernel
 from solver.laws.memory import MemoryIntegrand
 
 from .fields import Ctx, check_keys, names, need, number, string, vector
 from .time import PRONY_KERNELS, memory_rule
 
-KERNELS = ("none", "constant", "exponential", "tabulated")
+KERNELS = ("none", "constant", "exponential", "tabulated", "power")
 RULES = ("auto", "left", "trapezoid", "trapezoid_extrapolated")
 SECOND_ORDER_RULES = ("trapezoid", "trapezoid_extrapolated")
-_USES = {"none": (), "constant": ("weights",), "exponential": ("weights", "times"), "tabulated": ("table",)}
+FITTED_KERNELS = ("tabulated", "power")  # replaced at set-up by a sum of exponentials (solver.laws.kernels)
+_USES = {"none": (), "constant": ("weights",), "exponential": ("weights", "times"),
+         "tabulated": ("table", "kernel_tolerance"), "power": ("coefficient", "exponent", "kernel_tolerance")}
+_OPTIONAL = ("weights", "times", "table", "coefficient", "exponent", "kernel_tolerance")
 
 
 @dataclass(frozen=True)
@@ -23,7 +27,9 @@ class MemoryConfig:
 
     ``constant``: g = weights[0]; ``exponential``: g(s) = sum_i weights[i]
     exp(-s/times[i]) (a Prony series); ``tabulated``: g given by ``table``
-    rows [s, g(s)], linear in between (keeps the full past); ``none``: no memory.
+    rows [s, g(s)], linear in between; ``power``: g(s) = coefficient s^-exponent, 0 < exponent < 1;
+    ``none``: no memory. A tabulated or power kernel runs as the sum of exponentials :meth:`fit` finds, to
+    ``kernel_tolerance`` relative at the lags the run evaluates (no past is stored).
     ``rule``: ``left``, the paper's left-rectangle sum; ``trapezoid``, the trapezoidal rule implicit
     in the current level (Newton only, one factorization per step); ``trapezoid_extrapolated``, the
     trapezoidal rule with the current level's u extrapolated from the two before (explicit: no
@@ -35,8 +41,24 @@ class MemoryConfig:
     weights: tuple[float, ...] = (1.0,)
     times: tuple[float, ...] = ()
     table: tuple[tuple[float, float], ...] = ()
+    coefficient: float = 1.0
+    exponent: float = 0.5
+    kernel_tolerance: float = 1e-8
     L: float = 1000.0
     rule: str = "auto"
+
+    def law(self) -> PowerKernel | TabulatedKernel:
+        """The kernel law of a tabulated or power kernel (:mod:`solver.laws.kernels`)."""
+        if self.kernel == "power":
+            return PowerKernel(self.coefficient, self.exponent)
+        if self.kernel == "tabulated":
+            return TabulatedKernel(self.table)
+        raise ValueError(f"kernel '{self.kernel}' is a Prony series already")
+
+    def fit(self, k: float, steps: int) -> KernelFit:
+        """The sum of exponentials that replaces a tabulated or power kernel in a run of ``steps`` steps of k
+        (cached: the scene's check and the model's history share it). Raises KernelFitError."""
+        return self.law().prony(k, steps, self.kernel_tolerance, zero=self.rule in SECOND_ORDER_RULES)
 
 
 def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
@@ -47,10 +69,11 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     order = scene["time"].order
     rule = memory_rule(order, kernel, rule)
     if rule in SECOND_ORDER_RULES and kernel not in PRONY_KERNELS:
-        raise ctx.fail("memory.rule", rule, "the trapezoidal rules are for constant and exponential kernels")
-    if order == 2 and kernel == "tabulated":
-        raise ctx.fail("memory.kernel", kernel, "time.order = 2 needs a constant or exponential kernel "
-                       "(a tabulated kernel keeps the first-order left-rectangle sum)")
+        raise ctx.fail("memory.rule", rule, "the trapezoidal rules are for constant, exponential and tabulated "
+                       "kernels")
+    if rule in SECOND_ORDER_RULES and kernel == "power":
+        raise ctx.fail("memory.rule", rule, "the trapezoidal rules need g(0), which is infinite for a power kernel: "
+                       "use rule = 'left' (time.order = 1)")
     if order == 2 and rule == "left" and kernel != "none":
         raise ctx.fail("memory.rule", rule, "time.order = 2 needs a second-order rule: trapezoid or trapezoid_extrapolated")
     L = number(ctx, "memory.L", t.get("L", d.L))
@@ -58,7 +81,7 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
         MemoryIntegrand.check_truncation(L)
     except ConfigError as exc:
         raise ctx.fail(f"memory.{exc.key}", exc.value, exc.allowed) from None
-    for key in ("weights", "times", "table"):
+    for key in _OPTIONAL:
         if key in t and key not in _USES[kernel]:
             raise ctx.fail(f"memory.{key}", t[key], f"not used by kernel '{kernel}'")
     weights: tuple[float, ...] = ()
@@ -81,12 +104,30 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
         s = [r[0] for r in table]
         if s[0] != 0 or any(b <= a for a, b in zip(s, s[1:])):
             raise ctx.fail("memory.table", s, "s must start at 0 and increase strictly")
-    return MemoryConfig(kernel, weights, times, table, L, rule)
+    coefficient, exponent = d.coefficient, d.exponent
+    if kernel == "power":
+        coefficient = number(ctx, "memory.coefficient", t.get("coefficient", d.coefficient))
+        exponent = number(ctx, "memory.exponent", t.get("exponent", d.exponent))
+        try:  # the law checks its own parameters
+            PowerKernel.check(coefficient, exponent)
+        except ValueError as exc:
+            key, allowed = str(exc).split(": ", 1)
+            raise ctx.fail(f"memory.{key}", coefficient if key == "coefficient" else exponent, allowed) from None
+    tol = number(ctx, "memory.kernel_tolerance", t.get("kernel_tolerance", d.kernel_tolerance))
+    need(ctx, "memory.kernel_tolerance", tol, 1e-14 <= tol < 1, "must be in [1e-14, 1)")
+    cfg = MemoryConfig(kernel, weights, times, table, coefficient, exponent, tol, L, rule)
+    if kernel in FITTED_KERNELS:
+        tm = scene["time"]
+        try:  # refused here, with the scene's source, rather than when the model is built
+            cfg.fit(tm.k, tm.steps)
+        except KernelFitError as exc:
+            raise ctx.fail("memory.kernel_tolerance", tol, exc.reason) from None
+    return cfg
 
 
 def to_toml(m: MemoryConfig) -> dict:
     out = dataclasses.asdict(m)
-    for key in ("weights", "times", "table"):
+    for key in _OPTIONAL:
         if key not in _USES[m.kernel]:
             out.pop(key)
     return out

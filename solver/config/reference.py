@@ -57,7 +57,12 @@ MEANING: dict[str, str] = {
     "memory.kernel": "the memory kernel g in G = zeta(s) g(t - s) Phi_L(A eps(u(s))); none: no memory",
     "memory.weights": "constant: g = weights[0]; exponential: the Prony weights",
     "memory.times": "exponential: the Prony time constants (> 0)",
-    "memory.table": "tabulated: rows [s, g(s)], linear in between",
+    "memory.table": "tabulated: rows [s, g(s)], linear in between, constant after the last; run as a sum of "
+                    "exponentials (kernel_tolerance)",
+    "memory.coefficient": "power: c in g(s) = c s^-alpha (nonzero)",
+    "memory.exponent": "power: alpha in g(s) = c s^-alpha, 0 < alpha < 1 (weakly singular: left rule only)",
+    "memory.kernel_tolerance": "tabulated, power: the largest relative error |g~ - g| / |g| of the sum of exponentials "
+                               "g~ that replaces g, at the lags the run evaluates (at most 64 terms)",
     "memory.L": "truncation level of Phi_L",
     "memory.rule": "quadrature of the memory integral (auto: left for order 1, trapezoid_extrapolated for order 2)",
     "damage.enabled": "solve the damage equation; false: zeta = zeta0 throughout",

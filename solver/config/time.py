@@ -28,7 +28,9 @@ class TimeConfig:
         return int(round(self.T / self.k))
 
 
-PRONY_KERNELS = ("constant", "exponential")  # kernels with a recursive history, the only ones a trapezoid fits
+# kernels with a recursive history, the only ones a trapezoid fits (tabulated and power ones run as fitted sums of
+# exponentials; a power kernel has no g(0), and the memory section refuses it a trapezoid)
+PRONY_KERNELS = ("constant", "exponential", "tabulated", "power")
 
 
 def memory_rule(order: int, kernel: str, rule: str) -> str:

@@ -93,13 +93,7 @@ def _fields(model) -> dict[str, _Field]:
         cq = rule.evaluator(ufl.SpatialCoordinate(model.geo.mesh), rule.space((gdim,)))().reshape(-1, gdim)
         nq = Q.dofmap.index_map.size_local
         for k, v in model.history.state().items():
-            if v.ndim == 1:
-                out[f"history/{k}"] = _Field(cq, v.reshape(len(cq), -1), nq, setter(v))
-            else:  # the tabulated past (steps + 1, points * d * d): stored per point
-                def assign_past(rows: np.ndarray, v=v) -> None:
-                    v[...] = rows.reshape(len(cq), v.shape[0], -1).transpose(1, 0, 2).reshape(v.shape)
-                rows = v.reshape(v.shape[0], len(cq), -1).transpose(1, 0, 2).reshape(len(cq), -1)
-                out[f"history/{k}"] = _Field(cq, rows, nq, assign_past)
+            out[f"history/{k}"] = _Field(cq, v.reshape(len(cq), -1), nq, setter(v))
     return out
 
 

@@ -3,7 +3,8 @@
 :func:`run` drives :func:`solver.run.stepper.levels` and writes what it yields into the files
 :mod:`solver.io.layout` names: ``solution.xdmf`` + ``fields/`` (sigma_n = A eps(u_n) + M_n and the rest,
 :mod:`solver.io.fields`), ``timeseries.csv`` (one row a level), ``contact.csv`` (the contact results along Γ_C at
-each written level, :mod:`solver.io.contact_profile`; scenes with contact), ``config.toml`` (the resolved scene)
+each written level, :mod:`solver.io.contact_profile`; scenes with contact), ``config.toml`` (the resolved
+scene; a first comment line gives the terms and kernel error of a tabulated or power kernel's sum of exponentials)
 and ``checkpoint.h5`` every ``output.checkpoint_every`` levels. The directory is prepared before
 (:func:`solver.io.layout.prepare`).
 """
@@ -94,7 +95,9 @@ class _Writers:
         self.comm, self.steps, self.every = comm, cfg.time.steps, cfg.output.every
         files = ResultsDir(outdir) if outdir is not None else None
         if files is not None:
-            on_rank0(comm, lambda: write_text_atomic(files.config, dumps(cfg)))
+            fit = model.history.kernel_fit if model.history is not None else None
+            head = f"# memory.kernel = {cfg.memory.kernel!r} runs as {fit.summary()}\n" if fit is not None else ""
+            on_rank0(comm, lambda: write_text_atomic(files.config, head + dumps(cfg)))
         self.out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
         columns = timeseries_columns(model, sensors)
         self.csv = CSVWriter(files.timeseries, comm, keep=keep, columns=columns) if files is not None else None

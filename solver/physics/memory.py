@@ -7,7 +7,8 @@ The scheme's memory sum is a left-rectangle rule,
 evaluated at the quadrature points of the displacement form. For a Prony
 kernel g(s) = sum_i c_i exp(-s / tau_i) (tau = inf: the constant kernel) it is
 the recursion M_n^i = exp(-k / tau_i) (M_{n-1}^i + k c_i H_{n-1}): no past is
-stored. Only a tabulated (general) kernel keeps every H_m.
+stored. A tabulated or power kernel runs as the sum of exponentials fitted to it at set-up
+(:mod:`solver.laws.kernels`), so no kernel keeps the past.
 
 H is the law :class:`solver.laws.memory.MemoryIntegrand`, evaluated at the points by
 :mod:`solver.physics.memory_source`. The history is committed once per step, after the step has
@@ -30,6 +31,8 @@ from dolfinx import fem
 from petsc4py import PETSc
 
 from solver.config import MemoryConfig
+from solver.config.memory import FITTED_KERNELS
+from solver.laws.kernels import KernelFit
 from solver.laws.memory import MemoryIntegrand, truncate
 from solver.physics.material import strain
 from solver.physics.quadrature import QuadratureRule, all_finite
@@ -41,6 +44,7 @@ class History:
     M: fem.Function
     extrapolated = False  # True: the current level's term is set by extrapolate() before the displacement solve
     current_weight: fem.Constant | None = None  # the implicit trapezoid's weight of the current level's term
+    kernel_fit: KernelFit | None = None  # a tabulated or power kernel's sum of exponentials, its terms and error
 
     def commit(self, n: int) -> None:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
@@ -169,29 +173,6 @@ class PronyHistory(History):
         return out
 
 
-class TabulatedHistory(History):
-    """A general kernel g(s) given as a table: the full past H_0..H_{n} is kept."""
-
-    def __init__(self, rule: QuadratureRule, source, table, k: float, steps: int) -> None:
-        self.rule = rule
-        self.M = fem.Function(source.Q, name="memory")
-        self.H = source
-        self.k = k
-        self.past = np.zeros((steps + 1, self.M.x.array.size))
-        s = np.array([r[0] for r in table])
-        g = np.array([r[1] for r in table])
-        # g((n - m) k) for lags 1..steps+1; beyond the table, the last value holds
-        self.g = np.interp(k * np.arange(0, steps + 2), s, g)
-
-    def commit(self, n: int) -> None:
-        self.H(self.past[n])
-        lags = self.g[n + 1 - np.arange(n + 1)]  # g((n+1-m) k), m = 0..n
-        self.M.x.array[:] = self.k * (lags @ self.past[: n + 1])
-
-    def state(self) -> dict[str, np.ndarray]:
-        return {"M": self.M.x.array, "past": self.past}
-
-
 class PlaneStrainHistory(History):
     """The in-plane history and the out-of-plane one M_33 (plane strain), committed and checkpointed together.
 
@@ -222,6 +203,10 @@ class PlaneStrainHistory(History):
     def current_weight(self) -> fem.Constant | None:
         return self.main.current_weight
 
+    @property
+    def kernel_fit(self) -> KernelFit | None:
+        return self.main.kernel_fit
+
     def finite(self) -> bool:
         return self.main.finite()
 
@@ -246,9 +231,10 @@ def memory_source(u, zeta, A, L: float):
 
 def make_history(cfg: MemoryConfig, sum_rule: str, rule: QuadratureRule, source, k: float,
                  steps: int) -> History | None:
-    """The cheapest exact history for the kernel: None, a recursion, or the full past.
+    """The history for the kernel: None, or the Prony recursion (a tabulated or power kernel's with the sum of
+    exponentials fitted to it for this run's lags, :meth:`MemoryConfig.fit`, kept as ``kernel_fit``).
 
-    ``sum_rule``: the rule in time the scene's :class:`solver.config.time.TimeScheme` chose (a Prony kernel's).
+    ``sum_rule``: the rule in time the scene's :class:`solver.config.time.TimeScheme` chose.
     ``source`` evaluates H at the rule's points (:mod:`solver.physics.memory_source`): the quadrature
     space ``Q``, ``source(out, scale, base)`` -> base + scale H and ``extrapolated(u_prev, ...)``.
     """
@@ -256,7 +242,13 @@ def make_history(cfg: MemoryConfig, sum_rule: str, rule: QuadratureRule, source,
         return None
     if cfg.kernel in ("constant", "exponential"):
         return PronyHistory(rule, source, cfg.weights, cfg.times, k, SUM_RULES[sum_rule])
-    return TabulatedHistory(rule, source, cfg.table, k, steps)
+    if cfg.kernel not in FITTED_KERNELS:
+        raise ValueError(f"unknown memory kernel '{cfg.kernel}'")
+    time_rule = SUM_RULES[sum_rule]
+    fit = cfg.law().prony(k, steps, cfg.kernel_tolerance, zero=time_rule.first_weight != 1.0)
+    history = PronyHistory(rule, source, fit.prony.weights, fit.prony.times, k, time_rule)
+    history.kernel_fit = fit
+    return history
 
 
 def trapezoid_term(history: PronyHistory, integrand: MemoryIntegrand, zeta):
@@ -264,7 +256,7 @@ def trapezoid_term(history: PronyHistory, integrand: MemoryIntegrand, zeta):
     rule's points, weighted by the history's ``current_weight`` (which the history's commit sets)."""
 
     if history.current_weight is None:
-        rule = history.sum_rule.name if isinstance(history, PronyHistory) else "tabulated"
+        rule = history.sum_rule.name if isinstance(history, PronyHistory) else type(history).__name__
         raise ValueError(f"a {rule} history has no implicit current-level term (only the implicit trapezoid's has)")
     weight, dx = history.current_weight, history.rule.dx
 

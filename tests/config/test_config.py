@@ -73,7 +73,7 @@ REJECT = [
     ({"boundary": {"left": {"role": "clamped"}, "right": {"role": "traction", "traction": [[1, 0, 0], [0, 0, 0]]}}},
      "boundary.right.traction"),
     ({"boundary": {"left": {"role": "clamped", "interval": [0.5, 2.0]}}}, "boundary.left.interval"),
-    ({"memory": {"kernel": "power"}}, "memory.kernel"),
+    ({"memory": {"kernel": "gamma"}}, "memory.kernel"),
     ({"memory": {"L": -1.0}}, "memory.L"),
     ({"memory": {"kernel": "exponential", "weights": [1.0]}}, "memory.times"),
     ({"memory": {"kernel": "exponential", "weights": [1.0], "times": [0.0]}}, "memory.times[0]"),
@@ -268,7 +268,7 @@ def test_sections_registry_drives_parsing_and_writing():
     ({"discretization": {"u_degree": 3}}, "discretization.u_degree"),
     ({"discretization": {"zeta_degree": 0}}, "discretization.zeta_degree"),
     ({"time": {"order": 3}}, "time.order"),
-    ({"time": {"order": 2}, "memory": {"kernel": "tabulated", "table": [[0, 1], [1, 1]]}}, "memory.kernel"),
+    ({"time": {"order": 2}, "memory": {"kernel": "power"}}, "memory.rule"),
     ({"time": {"order": 2}, "memory": {"rule": "left"}}, "memory.rule"),
     ({"time": {"order": 2}, "solver": {"damage_scheme": "semi_implicit"}}, "solver.damage_scheme"),
 ])

@@ -15,7 +15,7 @@ from solver.config import MemoryConfig, from_dict
 from solver.errors import ConfigError
 from solver.laws.memory import MemoryIntegrand
 from solver.physics.material import elasticity, lame, strain
-from solver.physics.memory import PronyHistory, TabulatedHistory, make_history, memory_source, trapezoid_term
+from solver.physics.memory import PronyHistory, make_history, memory_source, trapezoid_term
 from solver.physics.memory_source import MemorySource
 from solver.physics.quadrature import QuadratureRule
 
@@ -77,22 +77,58 @@ def test_recursion_matches_direct_sum(comm, name, degree):
     assert comm.allreduce(np.abs(raw).max(), op=MPI.MAX) > cfg.L
 
 
-def test_tabulated_kernel_matches_prony(comm):
-    """A table of an exponential, sampled at the step times, reproduces the recursion."""
+@pytest.mark.parametrize("sum_rule", ["left", "trapezoid_extrapolated"])
+def test_tabulated_kernel_matches_prony(comm, sum_rule):
+    """A table of a two-term Prony kernel, sampled at the step times (rows at k/2), runs as the recursion with the two
+    terms found back (no past kept): M equals the Prony kernel's to 1e-12, with either rule."""
     m, u, zeta, rule = _setup(comm)
     k, steps = 0.1, 8
-    s = k * np.arange(steps + 2)
-    table = tuple((float(si), float(-np.exp(-si))) for si in s)
-    src = MemorySource(rule, u, zeta, law(1000.0))
-    tab = make_history(MemoryConfig(kernel="tabulated", table=table), "left", rule, src, k, steps)
-    pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0,), times=(1.0,)), "left", rule, src, k,
-                       steps)
-    assert isinstance(tab, TabulatedHistory)
+    s = 0.5 * k * np.arange(2 * steps + 3)
+    table = tuple((float(si), float(-np.exp(-si) - 0.5 * np.exp(-si / 0.3))) for si in s)
+    src = MemorySource(rule, u, zeta, law(1000.0), keep=2)
+    tab = make_history(MemoryConfig(kernel="tabulated", table=table), sum_rule, rule, src, k, steps)
+    pro = make_history(MemoryConfig(kernel="exponential", weights=(-1.0, -0.5), times=(1.0, 0.3)), sum_rule, rule,
+                       src, k, steps)
+    assert isinstance(tab, PronyHistory) and tab.kernel_fit.terms == 2 and tab.kernel_fit.error <= 1e-8
+    assert pro.kernel_fit is None and not hasattr(tab, "past")
     for n in range(steps):
         _drive(u, zeta, n)
         tab.commit(n)
         pro.commit(n)
-        assert np.allclose(tab.M.x.array, pro.M.x.array, rtol=1e-12, atol=1e-12)
+        if sum_rule == "trapezoid_extrapolated":
+            tab.extrapolate(None)
+            pro.extrapolate(None)
+        assert np.allclose(tab.M.x.array, pro.M.x.array, rtol=1e-12, atol=1e-12 * np.abs(pro.M.x.array).max())
+
+
+def test_power_kernel_matches_the_direct_sum_with_the_exact_kernel(comm):
+    """g(s) = 0.7 s^-0.5 as a sum of exponentials: M_n equals k sum_m g((n-m)k) H_m with the exact g to the kernel
+    error the fit reports (the sum's terms are of one sign, so M's relative error is at most the kernel's)."""
+    m, u, zeta, rule = _setup(comm)
+    k, steps = 0.05, 12
+    cfg = MemoryConfig(kernel="power", coefficient=0.7, exponent=0.5, kernel_tolerance=1e-9, L=150.0)
+    hist = make_history(cfg, "left", rule, MemorySource(rule, u, zeta, law(cfg.L)), k, steps)
+    fit = hist.kernel_fit
+    assert isinstance(hist, PronyHistory) and fit.error <= 1e-9 and fit.terms == len(hist.weights) > 1
+    probe = rule.evaluator(memory_source(u, zeta, A, cfg.L), hist.M.function_space)
+    hs = []
+    worst = 0.0
+    for n in range(steps):
+        _drive(u, zeta, n)
+        hs.append(probe().copy())
+        hist.commit(n)
+        want = _direct(hs, lambda s: 0.7 * s ** -0.5, k, n + 1)
+        bound = k * sum(0.7 * ((n + 1 - j) * k) ** -0.5 * np.abs(hs[j]) for j in range(n + 1))
+        worst = max(worst, float(np.max(np.abs(hist.M.x.array - want) / np.maximum(bound, 1e-300))))
+    worst = comm.allreduce(worst, op=MPI.MAX)
+    assert worst <= fit.error * (1 + 1e-6) + 1e-14 and worst > 0
+
+
+def test_power_kernel_refuses_a_trapezoid(comm):
+    m, u, zeta, rule = _setup(comm)
+    from solver.laws.kernels import KernelFitError
+    with pytest.raises(KernelFitError, match="g\\(0\\)"):
+        make_history(MemoryConfig(kernel="power"), "trapezoid", rule, MemorySource(rule, u, zeta, law(1000.0)), 0.1, 3)
 
 
 def test_no_memory_builds_nothing(comm):

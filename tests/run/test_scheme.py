@@ -16,7 +16,7 @@ SCENE = {"mesh": {"nx": 4, "ny": 4}, "time": {"T": 0.2, "k": 0.1}}
 
 @pytest.mark.parametrize("order,kernel,rule,want", [
     (1, "constant", "auto", "left"), (2, "constant", "auto", "trapezoid_extrapolated"),
-    (2, "exponential", "auto", "trapezoid_extrapolated"), (2, "tabulated", "auto", "left"),
+    (2, "exponential", "auto", "trapezoid_extrapolated"), (2, "tabulated", "auto", "trapezoid_extrapolated"),
     (2, "none", "auto", "left"), (1, "constant", "trapezoid", "trapezoid"),
     (2, "constant", "trapezoid", "trapezoid"), (1, "exponential", "trapezoid_extrapolated", "trapezoid_extrapolated")])
 def test_the_memory_rule_follows_the_order_unless_named(order, kernel, rule, want):
