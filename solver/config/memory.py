@@ -48,6 +48,8 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     rule = memory_rule(order, kernel, rule)
     if rule in SECOND_ORDER_RULES and kernel not in PRONY_KERNELS:
         raise ctx.fail("memory.rule", rule, "the trapezoidal rules are for constant and exponential kernels")
+    if scene["time"].adaptive and kernel == "tabulated":
+        raise ctx.fail("memory.kernel", kernel, "adaptive steps (time.adaptive) need a constant or exponential kernel")
     if order == 2 and kernel == "tabulated":
         raise ctx.fail("memory.kernel", kernel, "time.order = 2 needs a constant or exponential kernel "
                        "(a tabulated kernel keeps the first-order left-rectangle sum)")
