@@ -22,7 +22,6 @@ import time
 from pathlib import Path
 
 import dolfinx.fem.petsc  # noqa: F401
-import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
