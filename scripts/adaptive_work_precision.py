@@ -8,6 +8,7 @@ the cases alternated within a round, and the median time kept. The uniform run t
 error is interpolated log-log between the two uniform runs around it.
 
     python scripts/adaptive_work_precision.py [--scenes example1 hard load_cycle] [--rounds 3] [--ref 2560]
+        [--tolerances 1e-2 1e-3 ...]
 
 writes benchmarks/results/adaptive_work_precision.{json,md} and docs/figures/adaptive_work_precision.png.
 """
@@ -18,19 +19,22 @@ import argparse
 import json
 import math
 import statistics
+import sys
 import time
 from pathlib import Path
 
-import dolfinx.fem.petsc  # noqa: F401
-import ufl
-from dolfinx import fem
-from mpi4py import MPI
-
-from solver.config import load
-from solver.run.model import build_model
-from solver.run.stepper import levels
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this tree's solver, not an installed one
+
+import dolfinx.fem.petsc  # noqa: E402, F401
+import ufl  # noqa: E402
+from dolfinx import fem  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from solver.config import load  # noqa: E402
+from solver.run.model import build_model  # noqa: E402
+from solver.run.stepper import levels  # noqa: E402
+
 SCENES = {
     "example1": ("example1.toml", ["mesh.nx=8", "mesh.ny=8"]),
     "hard": ("hard.toml", ["mesh.nx=8", "mesh.ny=8"]),
@@ -133,7 +137,8 @@ def chart(data: dict, path: Path) -> None:
 def markdown(data: dict, args: argparse.Namespace) -> str:
     lines = ["# Adaptive steps: work-precision", "",
              f"`python scripts/adaptive_work_precision.py --scenes {' '.join(args.scenes)} --rounds {args.rounds} "
-             f"--ref {args.ref}` (8 x 8 meshes, order 1; reference: {args.ref} uniform steps; error at T). "
+             f"--ref {args.ref} --tolerances {' '.join(f'{t:g}' for t in args.tolerances)}` "
+             f"(8 x 8 meshes, order 1; reference: {args.ref} uniform steps; error at T). "
              "Ratios: the adaptive run's steps (accepted + rejected) and time loop over the uniform run's that "
              "reaches the same error (interpolated log-log; NaN: outside the uniform runs' range). Target: steps "
              "<= 0.5, time <= 0.67, error <= tolerance.", ""]
@@ -155,8 +160,10 @@ def main() -> None:
     p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--ref", type=int, default=2560)
+    p.add_argument("--tolerances", type=float, nargs="+", default=TOLERANCES)
     p.add_argument("--out", default=str(ROOT / "benchmarks/results/adaptive_work_precision"))
     args = p.parse_args()
+    TOLERANCES[:] = args.tolerances
     data = {s: study(s, args.rounds, args.ref) for s in args.scenes}
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float) + "\n")
