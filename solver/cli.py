@@ -102,18 +102,42 @@ def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return p
 
 
-def _progress(comm: MPI.Comm, steps: int, enabled: bool):
+def _progress(comm: MPI.Comm, steps: int, enabled: bool, T: float | None = None):
+    """The progress display: of the levels, or (``T`` given: adaptive steps) of the time."""
     if comm.rank != 0 or not enabled:
         return None, lambda row: None
     if not sys.stderr.isatty():
-        return None, _log_lines(steps)
-    bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr, mininterval=0.2)
+        return None, _log_lines(steps) if T is None else _log_time(T)
+    if T is not None:
+        bar = tqdm(total=T, unit="s", dynamic_ncols=True, file=sys.stderr, mininterval=0.2,
+                   bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}{postfix}]")
+    else:
+        bar = tqdm(total=steps + 1, unit="step", dynamic_ncols=True, file=sys.stderr, mininterval=0.2)
 
     def update(row: dict) -> None:
+        if T is not None:
+            bar.set_postfix_str(f"level {row['step']} k={row['k']:.3g} newton={row['newton_iterations']} "
+                                f"zeta_min={row['zeta_min']:.4f}", refresh=False)
+            bar.update(row["t"] - bar.n)
+            return
         bar.set_postfix_str(f"t={row['t']:.4g} newton={row['newton_iterations']} zeta_min={row['zeta_min']:.4f}", refresh=False)
         bar.update(1)
 
     return bar, update
+
+
+def _log_time(T: float):
+    """Progress of an adaptive run for a log: one line every 10 % of the time."""
+    done = [0]
+
+    def update(row: dict) -> None:
+        tenth = int(10 * row["t"] / T + 1e-9)
+        if tenth > done[0]:
+            done[0] = tenth
+            log.info("%3d%% t=%.4g level %d k=%.3g newton=%d zeta_min=%.4f", 10 * tenth, row["t"], row["step"],
+                     row["k"], row["newton_iterations"], row["zeta_min"])
+
+    return update
 
 
 def _log_lines(steps: int):
@@ -221,7 +245,7 @@ def cmd_run(args: argparse.Namespace, comm: MPI.Comm) -> int:
     fit = model.history.kernel_fit if model.history is not None else None
     if fit is not None:
         log.info("memory: the %s kernel as %s", cfg.memory.kernel, fit.summary())
-    bar, update = _progress(comm, cfg.time.steps, not args.no_progress)
+    bar, update = _progress(comm, cfg.time.steps, not args.no_progress, cfg.time.T if cfg.time.adaptive else None)
     stop = _StopOnSignal()
     try:
         rows = run(model, outdir, on_step=update, restart=args.restart, sensors=sensors, stop=stop)

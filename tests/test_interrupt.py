@@ -13,7 +13,7 @@ import pytest
 from conftest import ROOT, mpi_env, solver_cmd
 from conftest import run_cli as cli
 
-from solver.post.compare import compare_runs
+from solver.post.compare import UNCOMPARED, compare_runs
 from solver.post.results import read_csv, read_results
 
 pytestmark = pytest.mark.serial  # each test starts its own processes
@@ -83,3 +83,51 @@ def test_interrupted_run_stops_cleanly_and_restarts_to_the_same_result(tmp_path,
 def _same(a: Path, b: Path) -> None:
     diff = compare_runs(a, b)
     assert diff.levels == 501 and diff.same, diff.differences[:5]
+
+
+ADAPTIVE = ["run", "configs/example1.toml", "--set", "mesh.nx=8", "--set", "mesh.ny=8", "--set", "time.k=0.001",
+            "--set", "time.adaptive=true", "--set", "time.tolerance=1e-4", "--set", "output.every=25",
+            "--set", "output.checkpoint_every=20", "--no-progress"]
+
+
+def _rows(path: Path) -> list[dict]:
+    return read_csv(path / "timeseries.csv") if (path / "timeseries.csv").exists() else []
+
+
+def _same_adaptive(a: Path, b: Path) -> None:
+    """The same levels (their times and steps, estimates, rejections and results) to 1e-12."""
+    ra, rb = _rows(a), _rows(b)
+    assert len(ra) == len(rb) and len(ra) > 100
+    for x, y in zip(ra, rb):
+        for c in x:
+            if c.startswith("time_") or c in UNCOMPARED:
+                continue
+            assert float(x[c]) == pytest.approx(float(y[c]), rel=1e-12, abs=1e-12), (x["step"], c, x[c], y[c])
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_sigkill_during_an_adaptive_run_and_restart_equals_the_uninterrupted_run(tmp_path, nproc):
+    """The checkpoint carries the step history, the controller's memory and the extrapolation's past levels:
+    the restarted run takes the same steps as the uninterrupted one (and 2 ranks the same as 1)."""
+    ref, out, log = tmp_path / "ref", tmp_path / "o", tmp_path / "log"
+    assert cli([*ADAPTIVE, "--output", str(ref)], nproc).returncode == 0
+    with open(log, "w") as err:
+        proc = subprocess.Popen(solver_cmd([*ADAPTIVE, "--output", str(out)], nproc), cwd=ROOT, env=mpi_env(),
+                                stderr=err, stdout=subprocess.DEVNULL)
+        deadline = time.monotonic() + 300
+        csv = out / "timeseries.csv"
+        while not csv.exists() or csv.read_text().count("\n") < 120:  # complete rows, read while written
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+            time.sleep(0.05)
+        for pid in ([proc.pid] if nproc == 1 else _ranks(proc.pid)):
+            subprocess.run(["kill", "-KILL", str(pid)], check=True)
+        proc.wait(timeout=300)
+    killed_at = len(_rows(out))
+    restart = cli([*ADAPTIVE, "--output", str(out), "--restart"], nproc)
+    assert restart.returncode == 0, restart.stderr
+    assert killed_at < len(_rows(ref))  # it was stopped before the end
+    _same_adaptive(out, ref)
+    if nproc == 2:
+        serial = tmp_path / "serial"
+        assert cli([*ADAPTIVE, "--output", str(serial)], 1).returncode == 0
+        _same_adaptive(serial, ref)

@@ -74,6 +74,9 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     if rule in SECOND_ORDER_RULES and kernel == "power":
         raise ctx.fail("memory.rule", rule, "the trapezoidal rules need g(0), which is infinite for a power kernel: "
                        "use rule = 'left' (time.order = 1)")
+    if scene["time"].adaptive and kernel in ("tabulated", "power"):
+        raise ctx.fail("memory.kernel", kernel, "adaptive steps (time.adaptive) need a constant or exponential kernel "
+                       "(a fitted kernel's error is checked at the lags of uniform steps)")
     if order == 2 and rule == "left" and kernel != "none":
         raise ctx.fail("memory.rule", rule, "time.order = 2 needs a second-order rule: trapezoid or trapezoid_extrapolated")
     L = number(ctx, "memory.L", t.get("L", d.L))

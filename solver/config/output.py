@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .fields import Ctx, boolean, check_keys, integer, names, need, string
+from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
 
 # the fields a run can write (solver/io/fields.py says what each is)
 FIELD_NAMES = ("displacement", "damage", "stress", "elastic_stress", "von_mises", "von_mises_elastic", "stress_zz",
@@ -22,7 +22,8 @@ class OutputConfig:
     """Where and how often results are written (every=0: first and last only), which ``fields``
     (``damage`` only where the scene has damage, ``stress_zz``/``elastic_stress_zz`` only in plane strain) in
     which ``precision``, and checkpoints every
-    ``checkpoint_every`` steps (0: none)."""
+    ``checkpoint_every`` steps (0: none). ``times``: times in (0, T] an adaptive run (``time.adaptive``) lands on and
+    writes, besides every ``every``-th level."""
 
     directory: str = "results"
     every: int = 1
@@ -30,6 +31,7 @@ class OutputConfig:
     fields: tuple[str, ...] = DEFAULT_FIELDS
     precision: str = "double"
     checkpoint_every: int = 100
+    times: tuple[float, ...] = ()
 
 
 def _fields(ctx: Ctx, v) -> tuple[str, ...]:
@@ -55,8 +57,19 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> OutputConfig:
     precision = string(ctx, "output.precision", t.get("precision", d.precision), PRECISIONS)
     ckpt = integer(ctx, "output.checkpoint_every", t.get("checkpoint_every", d.checkpoint_every))
     need(ctx, "output.checkpoint_every", ckpt, ckpt >= 0, "must be >= 0 (0: no checkpoints)")
-    return OutputConfig(directory, every, xdmf, fields, precision, ckpt)
+    times = t.get("times", [])
+    if not isinstance(times, list):
+        raise ctx.fail("output.times", times, "must be a list of times in (0, time.T]")
+    times = tuple(number(ctx, "output.times", v) for v in times)
+    T = scene["time"].T
+    need(ctx, "output.times", list(times), all(0.0 < v <= T for v in times), f"each must be in (0, time.T = {T}]")
+    need(ctx, "output.times", list(times), not times or scene["time"].adaptive,
+         "applies to adaptive steps only (time.adaptive = true; uniform steps write every output.every levels)")
+    return OutputConfig(directory, every, xdmf, fields, precision, ckpt, tuple(sorted(times)))
 
 
 def to_toml(m: OutputConfig) -> dict:
-    return dataclasses.asdict(m)
+    out = dataclasses.asdict(m)
+    if not m.times:
+        del out["times"]
+    return out

@@ -59,8 +59,9 @@ class _Field:
     assign: object  # callable(rows) writing loaded values back
 
 
-def _fields(model) -> dict[str, _Field]:
-    """Everything a checkpoint holds, each with its dof coordinates and how to write it back."""
+def _fields(model, clock=None) -> dict[str, _Field]:
+    """Everything a checkpoint holds, each with its dof coordinates and how to write it back (``clock``: an
+    adaptive run's step controller, whose past levels are u- and zeta-shaped arrays)."""
     V = model.u.function_space
     nv = V.dofmap.index_map.size_local
     cv = V.tabulate_dof_coordinates()
@@ -83,6 +84,11 @@ def _fields(model) -> dict[str, _Field]:
         z = model.damage.zeta.x.array
         nz = Z.dofmap.index_map.size_local
         out["zeta"] = _Field(cz, z.reshape(len(cz), 1), nz, setter(z))
+    if clock is not None:
+        for name, (space, a) in clock.arrays().items():
+            c, n = (cv, nv) if space == "u" else (cz, nz)
+            out[f"clock/{name}"] = _Field(c, a.reshape(len(c), -1), n, setter(a))
+    if model.damage is not None:
         for k, v in model.damage.state().items():  # owned parts of PETSc vectors
             out[f"damage/{k}"] = _Field(cz[:nz], v.reshape(nz, 1), nz,
                                         lambda rows, k=k: model.damage.restore(k, rows))
@@ -97,10 +103,11 @@ def _fields(model) -> dict[str, _Field]:
     return out
 
 
-def write(directory: Path, model, step: int, t: float, part: int) -> None:
-    """Write the checkpoint of level ``step`` (collective; rank 0 writes)."""
+def write(directory: Path, model, step: int, t: float, part: int, clock=None) -> None:
+    """Write the checkpoint of level ``step`` (collective; rank 0 writes); ``clock``: an adaptive run's
+    :class:`solver.run.adaptive.StepController`, whose step history and past levels it keeps too."""
     comm = model.comm
-    fields = _fields(model)
+    fields = _fields(model, clock)
     gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
 
     def save() -> None:
@@ -112,7 +119,8 @@ def write(directory: Path, model, step: int, t: float, part: int) -> None:
                 h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
                                  **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
                                  **({f"damage_{k}": v for k, v in model.damage.scalars().items()}
-                                    if model.damage else {})})
+                                    if model.damage else {}),
+                                 **({f"clock_{k}": v for k, v in clock.scalars().items()} if clock else {})})
                 for name, parts in gathered.items():
                     coords = np.concatenate([p[0] for p in parts])
                     values = np.concatenate([p[1] for p in parts])
@@ -140,8 +148,9 @@ class Checkpoint:
     part: int
 
 
-def read(directory: Path, model) -> Checkpoint:
-    """Load the checkpoint into the model (u, zeta, history, solver state); refuse a mismatch clearly."""
+def read(directory: Path, model, clock=None) -> Checkpoint:
+    """Load the checkpoint into the model (u, zeta, history, solver state) and ``clock`` (an adaptive run's step
+    controller); refuse a mismatch clearly."""
 
     comm = model.comm
     path = Path(directory) / NAME
@@ -151,7 +160,7 @@ def read(directory: Path, model) -> Checkpoint:
         a = dict(h5.attrs)
         if a["scene"] != scene_hash(model.cfg):
             raise ConfigError(f"--restart: the scene differs from the one that wrote {path} (only [output] may change)")
-        fields, loaded, ok = _fields(model), {}, True
+        fields, loaded, ok = _fields(model, clock), {}, True
         for name, f in fields.items():
             ref = _keys(h5[f"{name}/coords"][...])
             mine = _keys(f.coords)
@@ -165,6 +174,8 @@ def read(directory: Path, model) -> Checkpoint:
     model.mech.restore_scalars({k.removeprefix("mech_"): v for k, v in a.items() if k.startswith("mech_")})
     if model.damage is not None:
         model.damage.restore_scalars({k.removeprefix("damage_"): v for k, v in a.items() if k.startswith("damage_")})
+    if clock is not None:
+        clock.restore_scalars({k.removeprefix("clock_"): float(v) for k, v in a.items() if k.startswith("clock_")})
     if model.u_prev is not None:
         model.u_prev.x.scatter_forward()
     model.u.x.scatter_forward()

@@ -54,6 +54,8 @@ TIMESERIES_COLUMNS = (
 # with solver.linear resolving to "iterative": the Krylov iterations of the level's displacement solves (summed
 # over its Newton iterations) and of its damage solve; they follow TIMESERIES_COLUMNS, before the scene's own
 KRYLOV_COLUMNS = ("krylov_iterations", "damage_krylov_iterations")
+# with time.adaptive: each level's step, its estimated local time error and the trial steps rejected before it
+STEP_COLUMNS = ("k", "error_estimate", "rejected")
 PROFILE_COLUMNS = ("step", "t", "part", "s", "x", "y", "z", "gap", "u_normal", "penetration", "pressure")
 
 
@@ -62,6 +64,7 @@ def timeseries_columns(model: Any, sensors: tuple = ()) -> tuple[str, ...]:
     fixed ones, the Krylov counts with the iterative solver, the diagnostics' (peak pressure, reactions), then each
     sensor's (a tolerance's error estimates)."""
     return (TIMESERIES_COLUMNS + (KRYLOV_COLUMNS if model.linear == "iterative" else ())
+            + (STEP_COLUMNS if model.cfg.time.adaptive else ())
             + model.mech.diagnostics.columns + tuple(c for s in sensors for c in s.columns))
 
 

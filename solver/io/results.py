@@ -25,6 +25,7 @@ from solver.io.fields import Outputs
 from solver.io.files import on_rank0, write_text_atomic
 from solver.io.layout import ResultsDir, timeseries_columns
 from solver.io.timeseries import CSVWriter
+from solver.run.adaptive import StepController, output_times
 from solver.run.model import Model
 from solver.run.stepper import levels, writes_level
 
@@ -46,9 +47,10 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     """
     cfg, comm = model.cfg, model.comm
     steps = cfg.time.steps
+    clock = StepController(model) if cfg.time.adaptive else None
     start, part, keep, keep_until = 0, 0, None, None
     if restart:
-        ckpt = checkpoint.read(outdir, model)
+        ckpt = checkpoint.read(outdir, model, clock)
         start, part, keep_until = ckpt.step + 1, ckpt.part, ckpt.t
         if comm.rank == 0:
             keep = _csv_lines_until(ResultsDir(outdir).timeseries, ckpt.step)
@@ -56,21 +58,22 @@ def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None
     rows: list[dict] = []
     finished, interrupted = False, None
     try:
-        for row in levels(model, start, sensors):
+        for row in levels(model, start, sensors, clock=clock):
             n = row["step"]
+            last = row["t"] >= cfg.time.T if clock is not None else n == steps
             try:
-                writers.level(row)
+                writers.level(row, last)
                 rows.append(row)
-                if writers.every_ckpt and n < steps and n % writers.every_ckpt == 0:
+                if writers.every_ckpt and not last and n % writers.every_ckpt == 0:
                     writers.out.flush()  # a checkpoint never runs ahead of the listed series
-                    checkpoint.write(outdir, model, n, row["t"], part)
+                    checkpoint.write(outdir, model, n, row["t"], part, clock)
             except SolveFailure as exc:
                 raise _located(exc, n, row["t"], cfg.time.k) from None
             if on_step is not None:
                 on_step(row)
-            signum = comm.allreduce(stop(), op=MPI.MAX) if stop is not None and n < steps else 0
+            signum = comm.allreduce(stop(), op=MPI.MAX) if stop is not None and not last else 0
             if signum:
-                interrupted = _stop_here(writers.out, outdir, model, n, row["t"], part, signum)
+                interrupted = _stop_here(writers.out, outdir, model, n, row["t"], part, signum, clock)
                 break
         try:
             writers.out.close()
@@ -93,6 +96,7 @@ class _Writers:
                  keep_until: float | None, profile_until: int | None) -> None:
         cfg, comm = model.cfg, model.comm
         self.comm, self.steps, self.every = comm, cfg.time.steps, cfg.output.every
+        self.marks = set(output_times(cfg)) if cfg.time.adaptive else set()  # the times an adaptive run writes
         files = ResultsDir(outdir) if outdir is not None else None
         if files is not None:
             fit = model.history.kernel_fit if model.history is not None else None
@@ -106,10 +110,11 @@ class _Writers:
                         if files is not None and traces is not None else None)
         self.every_ckpt = cfg.output.checkpoint_every if outdir is not None else 0
 
-    def level(self, row: dict) -> None:
-        """Write level ``row["step"]`` where it is written; its output time goes to the row."""
+    def level(self, row: dict, last: bool) -> None:
+        """Write level ``row["step"]`` where it is written (``last``: the run's last level); its output time goes
+        to the row."""
         n, t0 = row["step"], time.perf_counter()
-        if writes_level(n, self.steps, self.every):
+        if writes_level(n, n if last else -1, self.every) or row["t"] in self.marks:
             self.out.write(row["t"])
             if self.profile is not None:
                 self.profile.write(n, row["t"])
@@ -125,11 +130,11 @@ class _Writers:
 
 
 def _stop_here(out: Outputs, outdir: Path | None, model: Model, n: int, t: float, part: int,
-               signum: int) -> Interrupted:
+               signum: int, clock: StepController | None = None) -> Interrupted:
     """End an interrupted run at level n: the series written up to it and a checkpoint of it."""
     out.flush()
     if outdir is not None:
-        checkpoint.write(outdir, model, n, t, part)
+        checkpoint.write(outdir, model, n, t, part, clock)
     return Interrupted(signum, n, t, outdir is not None)
 
 

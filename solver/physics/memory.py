@@ -50,6 +50,10 @@ class History:
         """Given the converged level n (u_n, zeta_n), form M_{n+1}."""
         raise NotImplementedError
 
+    def set_step(self, k: float, k_prev: float | None) -> None:
+        """The next commit forms M_{n+1} over the step k = t_{n+1} - t_n; ``k_prev`` = t_n - t_{n-1} (None at n = 0)."""
+        raise NotImplementedError
+
     def extrapolate(self, u_prev: np.ndarray | None) -> None:
         """The current level's term at u* = 2 u - u_prev (``extrapolated`` histories only)."""
         raise NotImplementedError
@@ -111,14 +115,34 @@ class PronyHistory(History):
         # a constant, not a number: not compiled into the form
         self.current_weight = fem.Constant(rule.mesh, PETSc.ScalarType(0.0)) if sum_rule.implicit else None
         self.g0 = float(np.sum(weights))
-        self.k = k
-        taus = list(times) if times else [math.inf] * len(weights)
+        self.taus = list(times) if times else [math.inf] * len(weights)
+        taus = self.taus
         self.weights = np.asarray(weights, dtype=float)
-        self.decay = np.array([math.exp(-k / t) if math.isfinite(t) else 1.0 for t in taus])
+        self.k = math.nan
+        self.set_step(k, None)
         # one term: M itself is the term; several: one array per term
         self.terms = [np.zeros_like(self.M.x.array) for _ in taus] if len(taus) > 1 else None
         # several terms: H of a level, then its increment (no temporaries per step); one term needs none
         self._h = np.empty_like(self.M.x.array) if self.terms is not None else None
+
+    def set_step(self, k: float, k_prev: float | None) -> None:
+        """Variable steps (docs/model.md §3.9): each term decays by exp(-k/tau) over the step k = t_{n+1} - t_n;
+        H_n weighs k (left) or (k_prev + k)/2 (trapezoid); the extrapolation's u* = u_n + (k/k_prev)(u_n - u_{n-1}).
+        A uniform step keeps every number of the uniform recursion (the same k, weights and decay)."""
+        if k != self.k:
+            self.k = k
+            self.decay = np.array([math.exp(-k / t) if math.isfinite(t) else 1.0 for t in self.taus])
+        self.k_prev = k_prev
+        # H_n's weight over k: 1 but for the trapezoid after a change of step
+        uneven = self.sum_rule.first_weight != 1.0 and k_prev is not None and k_prev != k
+        self.stretch = 0.5 * (k_prev + k) / k if uneven else 1.0
+        self.ratio = k / k_prev if k_prev is not None and k_prev != k else 1.0
+
+    def _weight(self, n: int) -> float:
+        """H_n's weight in the recursion: k (left; the trapezoid's k/2 at n = 0), (k_prev + k)/2 (trapezoid)."""
+        if n == 0:
+            return self.sum_rule.first_weight * self.k
+        return 0.5 * (self.k_prev + self.k) if self.stretch != 1.0 else self.k
 
     def commit(self, n: int) -> None:
         half = self.sum_rule.first_weight if n == 0 else 1.0
@@ -126,7 +150,7 @@ class PronyHistory(History):
             self.current_weight.value = 0.5 * self.k * self.g0
         if self.terms is None:
             m = self.P if self.extrapolated else self.M.x.array
-            self.H(m, scale=half * self.k * self.weights[0], base=m)  # m += k c H, added by the source in one pass
+            self.H(m, scale=self._weight(n) * self.weights[0], base=m)  # m += k c H, added by the source in one pass
             if self.decay[0] != 1.0:
                 m *= self.decay[0]
             self._written()
@@ -134,6 +158,8 @@ class PronyHistory(History):
         h = self.H(self._h)
         if half != 1.0:
             h *= half
+        elif self.stretch != 1.0:
+            h *= self.stretch
         total = self.P if self.extrapolated else self.M.x.array
         total[:] = 0.0
         step = np.empty_like(h)
@@ -150,7 +176,7 @@ class PronyHistory(History):
         if u_prev is None:
             self.H(M, scale=w, base=self.P)
         else:
-            self.H.extrapolated(u_prev, M, scale=w, base=self.P)
+            self.H.extrapolated(u_prev, M, scale=w, base=self.P, ratio=self.ratio)
         self._written()
 
     def _written(self) -> None:
@@ -213,6 +239,10 @@ class PlaneStrainHistory(History):
     def commit(self, n: int) -> None:
         self.main.commit(n)
         self.out_of_plane.commit(n)
+
+    def set_step(self, k: float, k_prev: float | None) -> None:
+        self.main.set_step(k, k_prev)
+        self.out_of_plane.set_step(k, k_prev)
 
     def extrapolate(self, u_prev: np.ndarray | None) -> None:
         """The extrapolated trapezoid's current term for both, at the same u*."""

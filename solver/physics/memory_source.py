@@ -222,13 +222,18 @@ class MemorySource:
         return self._source(self.strain(), out, scale, base)
 
     def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
-                     base: np.ndarray | None = None) -> np.ndarray:
+                     base: np.ndarray | None = None, ratio: float = 1.0) -> np.ndarray:
         """H at u* = 2 u - u_prev and the current zeta (as :meth:`__call__`): eps(u*) = 2 eps(u) - eps(u_prev),
-        exactly (to round-off), from the kept strains (or a product where one is missing)."""
+        exactly (to round-off), from the kept strains (or a product where one is missing). ``ratio`` r of the
+        steps (variable steps): u* = (1 + r) u - r u_prev."""
         if self._extrapolated is None:
             self._extrapolated = np.empty_like(self._a)
-        eps = np.multiply(self.strain(), 2.0, out=self._extrapolated)
-        eps -= self.strain(u_prev)
+        if ratio == 1.0:
+            eps = np.multiply(self.strain(), 2.0, out=self._extrapolated)
+            eps -= self.strain(u_prev)
+        else:
+            eps = np.multiply(self.strain(), 1.0 + ratio, out=self._extrapolated)
+            eps -= ratio * self.strain(u_prev)
         return self._source(eps, out, scale, base)
 
     def zeta_at_points(self) -> np.ndarray | float:
@@ -344,11 +349,11 @@ class OutOfPlaneSource:
         return self._source(self.source.strain(), out, scale, base)
 
     def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
-                     base: np.ndarray | None = None) -> np.ndarray:
-        """H_33 at u* = 2 u - u_prev (see :meth:`MemorySource.extrapolated`)."""
+                     base: np.ndarray | None = None, ratio: float = 1.0) -> np.ndarray:
+        """H_33 at u* = (1 + r) u - r u_prev, r = ``ratio`` (see :meth:`MemorySource.extrapolated`)."""
         src = self.source
-        eps = 2.0 * src.strain()[:2]
-        eps -= src.strain(u_prev)[:2]
+        eps = (1.0 + ratio) * src.strain()[:2]
+        eps -= (src.strain(u_prev)[:2] if ratio == 1.0 else ratio * src.strain(u_prev)[:2])
         return self._source(eps, out, scale, base)
 
     def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,

@@ -48,6 +48,14 @@ class FirstOrderScheme:
         self.model = model
         self.scheme = scheme
 
+    def set_step(self, k: float, k_prev: float | None) -> None:
+        """Level n goes over k = t_n - t_{n-1}; ``k_prev`` = t_{n-1} - t_{n-2} (None at n = 1): the history's and
+        the damage step's weights (docs/model.md §3.9)."""
+        if self.model.history is not None:
+            self.model.history.set_step(k, k_prev)
+        if self.model.damage is not None:
+            self.model.damage.set_step(k, k_prev)
+
     def memory(self, n: int) -> None:
         """1. M_n from (u_{n-1}, zeta_{n-1}): level n-1 converged, so it is committed now."""
         if self.model.history is not None:
@@ -73,7 +81,8 @@ class SecondOrderScheme(FirstOrderScheme):
         return dinfo
 
     def _extrapolated_memory(self, n: int) -> None:
-        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1); then u_prev = u_{n-1}.
+        """M_n = P_n + (k/2) g(0) H(u*, zeta_n), u* = 2 u_{n-1} - u_{n-2} (u_0 at n = 1; variable steps:
+        u_{n-1} + (k_n / k_{n-1}) (u_{n-1} - u_{n-2})); then u_prev = u_{n-1}.
 
         H(u*) comes from the strains of u_{n-1} (just committed) and u_{n-2} by linearity: no third product."""
         model = self.model

@@ -22,6 +22,7 @@ from mpi4py import MPI
 from solver.errors import NonFiniteError, SolveFailure
 from solver.physics.diagnostics import DamageDiagnostics
 from solver.physics.quadrature import all_finite
+from solver.run.adaptive import StepController
 from solver.run.model import Model
 from solver.run.scheme import level_scheme
 
@@ -37,13 +38,19 @@ class Stepper:
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
         self.scheme = level_scheme(model, model.scheme)
 
-    def step(self, n: int) -> dict:
-        """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t."""
-        scheme, t = self.scheme, n * self.k
+    def step(self, n: int, t: float | None = None, k: float | None = None, k_prev: float | None = None) -> dict:
+        """Level n (n = 0: the initial elastic contact problem). Raises a SolveFailure that knows n and t.
+
+        ``t``, ``k``, ``k_prev``: variable steps, level n at t = t_{n-1} + k after a step k_prev (None at n = 1);
+        by default the uniform steps of the scene, t = n k."""
+        scheme = self.scheme
+        if t is None:
+            t, k, k_prev = n * self.k, self.k, (self.k if n >= 2 else None)
         t0 = time.perf_counter()
         dinfo = None
         try:
             if n > 0:
+                scheme.set_step(k, k_prev)
                 scheme.memory(n)  # 1. M_n from level n-1
             t1 = time.perf_counter()
             if n > 0:
@@ -92,17 +99,32 @@ def writes_level(n: int, steps: int, every: int) -> bool:
     return every > 0 and n % every == 0
 
 
-def levels(model: Model, start: int = 0, sensors: tuple = ()) -> Iterator[dict]:
+def levels(model: Model, start: int = 0, sensors: tuple = (), times=None, clock=None) -> Iterator[dict]:
     """Solve levels ``start``..steps of the model's scene, yielding each level's row; writes nothing.
 
     ``sensors``: objects with ``columns`` and ``sensor(row) -> dict`` that add their columns to
     every level's row (e.g. the error estimates of a tolerance run); their time counts as
     diagnostics. A row's ``time_output`` is 0 here and ``wall_time`` the sum of its parts; a
     writer adds the time it takes to both.
+
+    ``times``: variable steps given in advance, the levels' times t_0 = 0 < t_1 < ... (``start`` 0 only).
+    ``clock``: an adaptive run's :class:`solver.run.adaptive.StepController`, which chooses the steps (and
+    carries the step history a checkpoint keeps); by default the scene's (uniform, or adaptive with a new
+    controller).
     """
     stepper = Stepper(model)
-    for n in range(start, model.cfg.time.steps + 1):
-        row = stepper.step(n)
+    if clock is None and model.cfg.time.adaptive:
+        clock = StepController(model)
+    if clock is not None:
+        rows = clock.levels(stepper, start)
+    elif times is not None:
+        if start != 0:
+            raise ValueError("levels with given times start at level 0")
+        rows = (stepper.step(n, times[n], times[n] - times[n - 1] if n else 0.0,
+                             times[n - 1] - times[n - 2] if n >= 2 else None) for n in range(len(times)))
+    else:
+        rows = (stepper.step(n) for n in range(start, model.cfg.time.steps + 1))
+    for row in rows:
         if sensors:
             t0 = time.perf_counter()
             for sensor in sensors:

@@ -71,7 +71,7 @@ class Damage:
         dx = ufl.dx(metadata={"quadrature_degree": degree})
         phi = self.law.ufl(strain(u), self.zeta)
         k_ = fem.Constant(V.mesh, PETSc.ScalarType(k))  # a constant, not a number: one compiled form for every k
-        self.k = k
+        self.k, self.k_const, self.k_prev = k, k_, None
         a, rhs = self._forms(z, xi, phi, k_, dx)
         self.a = fem.form(a)
         self.rhs_form = fem.form(rhs)
@@ -92,6 +92,22 @@ class Damage:
         a = (z * xi + k_ * self.cfg.kappa * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
         rhs = (self.zeta + k_ * phi) * xi * dx
         return a, rhs
+
+    def set_step(self, k: float, k_prev: float | None) -> None:
+        """The next step goes over k = t_n - t_{n-1}; ``k_prev`` = t_{n-1} - t_{n-2} (None at n = 1). A new k
+        assembles the matrices again (factored again at the next solve); the same k changes nothing."""
+        self.k_prev = k_prev
+        if k == self.k:
+            return
+        self.k = k
+        self.k_const.value = k
+        self._reassemble()
+
+    def _reassemble(self) -> None:
+        """A (and the scheme's other k-dependent matrices) for the current k."""
+        self.A.zeroEntries()
+        fpetsc.assemble_matrix(self.A, self.a)
+        self.A.assemble()
 
     def state(self) -> dict[str, np.ndarray]:
         """Owned arrays a checkpoint must carry besides zeta (none for a one-step scheme)."""
@@ -161,6 +177,9 @@ class SemiImplicitDamage(Damage):
         rhs -= k_ * phi_z * self.zeta * xi * dx
         return a, rhs
 
+    def _reassemble(self) -> None:
+        """Nothing: every step assembles A at zeta_{n-1} and the current k."""
+
     def step(self) -> DamageStepInfo:
         self._check_stable()
         self.A.zeroEntries()
@@ -206,9 +225,16 @@ class CNAB2Damage(Damage):
         half = 0.5 * k_ * self.cfg.kappa
         a = (z * xi + half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx
         rhs = phi * xi * dx  # the source; the rest is explicit_half zeta_{n-1}
-        self.explicit_half = fpetsc.assemble_matrix(fem.form((z * xi - half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx))
+        self._explicit_form = fem.form((z * xi - half * ufl.inner(ufl.grad(z), ufl.grad(xi))) * ufl.dx)
+        self.explicit_half = fpetsc.assemble_matrix(self._explicit_form)
         self.explicit_half.assemble()
         return a, rhs
+
+    def _reassemble(self) -> None:
+        super()._reassemble()
+        self.explicit_half.zeroEntries()
+        fpetsc.assemble_matrix(self.explicit_half, self._explicit_form)
+        self.explicit_half.assemble()
 
     def state(self) -> dict[str, np.ndarray]:
         """The previous source of the second-order step (owned part)."""
@@ -224,13 +250,15 @@ class CNAB2Damage(Damage):
         self.have_prev = bool(scalars.get("have_prev", 0.0))
 
     def assemble_rhs(self) -> None:
-        """b = B zeta_{n-1} + k (3/2 s_{n-1} - 1/2 s_{n-2}), with s = (phi, xi) just assembled into b."""
+        """b = B zeta_{n-1} + k (3/2 s_{n-1} - 1/2 s_{n-2}), with s = (phi, xi) just assembled into b; variable steps:
+        k ((1 + r/2) s_{n-1} - r/2 s_{n-2}), r = k / k_prev (docs/model.md §3.9)."""
         super().assemble_rhs()
         self.b.copy(self.s)
         self.explicit_half.mult(self.zeta.vector, self._explicit_zeta)
-        self.b.scale(1.5 * self.k if self.have_prev else self.k)
+        r = self.k / self.k_prev if self.k_prev is not None and self.k_prev != self.k else 1.0
+        self.b.scale((1.0 + 0.5 * r) * self.k if self.have_prev else self.k)
         if self.have_prev:
-            self.b.axpy(-0.5 * self.k, self.s_prev)
+            self.b.axpy(-0.5 * r * self.k, self.s_prev)
         self.b.axpy(1.0, self._explicit_zeta)
 
     def step(self) -> DamageStepInfo:

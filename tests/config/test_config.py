@@ -381,3 +381,25 @@ def test_replace_merges_a_part_and_a_whole_part_changes_its_role():
     parts = {**cfg.document["boundary"], "bottom": {"role": "traction", "traction": [0.0, 0.0]}}
     free = from_dict({**cfg.document, "boundary": parts}, source=cfg.source)
     assert not free.contact and free == load(EX1, ['boundary.bottom={role="traction", traction=[0.0, 0.0]}'])
+
+
+def test_adaptive_time_keys():
+    """time.adaptive: k need not divide T; the bounds and output.times are checked; the adaptive keys (and
+    output.times) are refused without it, and a tabulated kernel is refused with it (one line each)."""
+    ex1 = ROOT / "configs/example1.toml"
+    cfg = load(ex1, ["time.adaptive=true", "time.k=0.003", "time.tolerance=1e-4", "time.k_max=0.1",
+                     "output.times=[0.25, 0.5]"])
+    assert cfg.time.adaptive and cfg.time.smallest == pytest.approx(1e-9) and cfg.time.largest == 0.1
+    assert cfg.output.times == (0.25, 0.5)
+    assert "adaptive =" not in dumps(load(ex1))  # a uniform scene's resolved file is as it was
+    assert load(ex1, ["time.adaptive=true"]).replace({}).time.adaptive
+    for sets, key in ((["time.tolerance=1e-3"], "time.tolerance"), (["time.k=0.003"], "time.k"),
+                      (["time.adaptive=true", "time.k_max=0.001"], "time.k_max"),
+                      (["time.adaptive=true", "time.k_min=0.1"], "time.k_min"),
+                      (["output.times=[0.5]"], "output.times"),
+                      (["time.adaptive=true", "output.times=[2.0]"], "output.times"),
+                      (["time.adaptive=true", "memory.kernel='tabulated'", "memory.table=[[0.0, 1.0], [1.0, 0.5]]"],
+                       "memory.kernel")):
+        with pytest.raises(ConfigError) as err:
+            load(ex1, sets)
+        assert key in str(err.value) and "\n" not in str(err.value), (sets, str(err.value))

@@ -138,3 +138,64 @@ def test_observed_order_in_k(comm, order, low, high):
     rates = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
     assert all(low <= r <= high for r in rates), (errs, rates)
 
+
+
+def _final_errors_of_variable_steps(comm, order: int, counts, k_ref: float, seed: int = 41) -> list[float]:
+    """||eps(u - u_ref)|| + ||zeta - zeta_ref|| at T of Example 1 (n = 8, T = 0.5) for steps drawn at random within
+    2x of each other (N of them for each N in ``counts``), against uniform steps k_ref on the same mesh."""
+    import dolfinx.fem.petsc  # noqa: F401
+    import ufl
+    from dolfinx import fem
+    from mpi4py import MPI
+
+    from solver.config import load
+    from solver.run.stepper import levels
+
+    T = 0.5
+    sets = ["mesh.nx=8", "mesh.ny=8", f"time.order={order}", f"time.T={T}"]
+
+    def final(k, times=None):
+        model = build_model(load(ROOT / "configs/example1.toml", [*sets, f"time.k={k}"]), comm)
+        rows = list(levels(model, times=times))
+        assert abs(rows[-1]["t"] - T) < 1e-12
+        return model, model.u.x.array.copy(), model.damage.zeta.x.array.copy()
+
+    model, u_ref, z_ref = final(k_ref)
+    err_u, err_z = fem.Function(model.u.function_space), fem.Function(model.damage.V)
+    e = ufl.sym(ufl.grad(err_u))
+    forms = fem.form(ufl.inner(e, e) * ufl.dx), fem.form(err_z * err_z * ufl.dx)
+    rng = np.random.default_rng(seed)
+    out = []
+    for count in counts:
+        steps = rng.uniform(1.0, 2.0, count)
+        times = np.concatenate([[0.0], np.cumsum(steps) * (T / steps.sum())])
+        times[-1] = T
+        _, u, z = final(T / count, times)
+        err_u.x.array[:] = u - u_ref
+        err_z.x.array[:] = z - z_ref
+        out.append(sum(np.sqrt(comm.allreduce(fem.assemble_scalar(f), op=MPI.SUM)) for f in forms))
+    return out
+
+
+@pytest.mark.parametrize("order,low,high", [(1, 0.8, 1.3), (2, 1.7, 2.3)])
+def test_random_variable_steps_converge_at_the_schemes_order(comm, order, low, high):
+    """Steps within 2x of each other, drawn at random, against uniform steps T/1280: the error at T falls at the
+    scheme's order as their number doubles (the variable-step memory sum, damage step and extrapolation)."""
+    errs = _final_errors_of_variable_steps(comm, order, [10, 20, 40, 80], 0.5 / 1280)
+    rates = [np.log2(a / b) for a, b in zip(errs, errs[1:])]
+    assert all(low <= r <= high for r in rates), (errs, rates)
+
+
+def test_uniform_times_given_as_variable_steps_give_the_uniform_run(comm):
+    """Levels at t_n = n k passed as times: the same numbers as the uniform run (k_n computed as differences)."""
+    from solver.config import load
+    from solver.run.stepper import levels
+
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=8", "mesh.ny=8", "time.order=2", "time.T=0.2",
+                                                "time.k=0.05"])
+    a = build_model(cfg, comm)
+    ra = list(levels(a))
+    b = build_model(cfg, comm)
+    rb = list(levels(b, times=[n * 0.05 for n in range(5)]))
+    assert [r["contact_force"] for r in ra] == pytest.approx([r["contact_force"] for r in rb], rel=1e-12)
+    assert np.allclose(a.u.x.array, b.u.x.array, rtol=1e-12, atol=1e-15)

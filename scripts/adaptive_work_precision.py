@@ -1,0 +1,177 @@
+"""Work-precision of adaptive steps against uniform steps (time.adaptive; docs/model.md §3.9).
+
+For each scene: a fine uniform reference (``--ref`` steps), uniform runs with N = 10·2^j steps and adaptive runs at a
+range of ``time.tolerance``, each measured by its levels (and the adaptive run's rejected trials), its time loop
+(the sum of the rows' ``wall_time``) and its time error at T against the reference, in the paper's norm
+||eps(u - u_ref)|| + ||zeta - zeta_ref|| (same mesh: time error only). Every run is repeated ``--rounds`` times,
+the cases alternated within a round, and the median time kept. The uniform run that reaches an adaptive run's
+error is interpolated log-log between the two uniform runs around it.
+
+    python scripts/adaptive_work_precision.py [--scenes example1 hard load_cycle] [--rounds 3] [--ref 2560]
+        [--tolerances 1e-2 1e-3 ...]
+
+writes benchmarks/results/adaptive_work_precision.{json,md} and docs/figures/adaptive_work_precision.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this tree's solver, not an installed one
+
+import dolfinx.fem.petsc  # noqa: E402, F401
+import ufl  # noqa: E402
+from dolfinx import fem  # noqa: E402
+from mpi4py import MPI  # noqa: E402
+
+from solver.config import load  # noqa: E402
+from solver.run.model import build_model  # noqa: E402
+from solver.run.stepper import levels  # noqa: E402
+
+SCENES = {
+    "example1": ("example1.toml", ["mesh.nx=8", "mesh.ny=8"]),
+    "hard": ("hard.toml", ["mesh.nx=8", "mesh.ny=8"]),
+    "load_cycle": ("load_cycle.toml", ["mesh.nx=8", "mesh.ny=8"]),
+}
+UNIFORM = [10, 20, 40, 80, 160, 320, 640]
+TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
+
+
+def one_run(scene: str, sets: list[str]) -> dict:
+    """A run in memory: its final u and zeta, levels, rejected trials and the time loop in seconds."""
+    file, base = SCENES[scene]
+    cfg = load(ROOT / "configs" / file, [*base, *sets])
+    model = build_model(cfg, MPI.COMM_WORLD)
+    start = time.perf_counter()
+    rows = list(levels(model))
+    loop = time.perf_counter() - start
+    z = model.damage.zeta.x.array.copy() if model.damage is not None else None
+    return {"model": model, "u": model.u.x.array.copy(), "zeta": z, "levels": len(rows) - 1,
+            "rejected": sum(int(r.get("rejected", 0)) for r in rows), "loop": loop, "t": rows[-1]["t"]}
+
+
+def error(ref: dict, run: dict) -> float:
+    model = ref["model"]
+    du = fem.Function(model.u.function_space)
+    du.x.array[:] = run["u"] - ref["u"]
+    e = ufl.sym(ufl.grad(du))
+    out = math.sqrt(MPI.COMM_WORLD.allreduce(fem.assemble_scalar(fem.form(ufl.inner(e, e) * ufl.dx)), op=MPI.SUM))
+    if ref["zeta"] is not None:
+        dz = fem.Function(model.damage.V)
+        dz.x.array[:] = run["zeta"] - ref["zeta"]
+        out += math.sqrt(MPI.COMM_WORLD.allreduce(fem.assemble_scalar(fem.form(dz * dz * ufl.dx)), op=MPI.SUM))
+    return out
+
+
+def uniform_at(err: float, uniform: list[dict], key: str) -> float:
+    """The uniform runs' ``key`` (levels or loop time) at error ``err``, log-log between the two around it (NaN
+    outside their range)."""
+    pts = sorted((u["error"], u[key]) for u in uniform if u["error"] > 0)
+    for (e0, v0), (e1, v1) in zip(pts, pts[1:]):
+        if e0 <= err <= e1:
+            s = (math.log(err) - math.log(e0)) / (math.log(e1) - math.log(e0))
+            return math.exp(math.log(v0) + s * (math.log(v1) - math.log(v0)))
+    return math.nan
+
+
+def study(scene: str, rounds: int, ref_steps: int) -> dict:
+    ref = one_run(scene, [f"time.k={1.0 / ref_steps}"])
+    cases = [("uniform", n, [f"time.k={1.0 / n}"]) for n in UNIFORM if 4 * n <= ref_steps]  # ref at least 4x finer
+    cases += [("adaptive", tol, ["time.adaptive=true", f"time.tolerance={tol}", "time.k=0.01"]) for tol in TOLERANCES]
+    times: dict[int, list[float]] = {i: [] for i in range(len(cases))}
+    results: dict[int, dict] = {}
+    for _ in range(rounds):
+        for i, (_, _, sets) in enumerate(cases):
+            run = one_run(scene, sets)
+            times[i].append(run["loop"])
+            results[i] = {"levels": run["levels"], "rejected": run["rejected"], "error": error(ref, run)}
+    out = {"uniform": [], "adaptive": []}
+    for i, (kind, value, _) in enumerate(cases):
+        row = {"steps" if kind == "uniform" else "tolerance": value, **results[i],
+               "loop": statistics.median(times[i]), "loop_range": [min(times[i]), max(times[i])]}
+        out[kind].append(row)
+    for a in out["adaptive"]:
+        a["trials"] = a["levels"] + a["rejected"]
+        a["uniform_levels"] = uniform_at(a["error"], out["uniform"], "levels")
+        a["uniform_loop"] = uniform_at(a["error"], out["uniform"], "loop")
+        a["steps_ratio"] = a["trials"] / a["uniform_levels"]
+        a["time_ratio"] = a["loop"] / a["uniform_loop"]
+        a["reliable"] = a["error"] <= a["tolerance"]
+    return out
+
+
+def chart(data: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, len(data), figsize=(4.2 * len(data), 7.5), squeeze=False)
+    for j, (scene, d) in enumerate(data.items()):
+        for i, key in enumerate(("levels", "loop")):
+            ax = axes[i][j]
+            u = d["uniform"]
+            ax.loglog([r["error"] for r in u], [r[key] for r in u], "o-", label="uniform")
+            a = d["adaptive"]
+            ax.loglog([r["error"] for r in a], [r["trials" if key == "levels" else key] for r in a], "s-",
+                      label="adaptive")
+            for r in a:
+                ax.axvline(r["tolerance"], color="0.85", lw=0.8, zorder=0)
+            ax.set_xlabel("time error at T (paper's norm)")
+            ax.set_ylabel("steps (adaptive: with rejected)" if key == "levels" else "time loop [s]")
+            ax.set_title(f"{scene}")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=8)
+    fig.suptitle("Adaptive vs uniform steps (grey lines: the adaptive runs' tolerances)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def markdown(data: dict, args: argparse.Namespace) -> str:
+    lines = ["# Adaptive steps: work-precision", "",
+             f"`python scripts/adaptive_work_precision.py --scenes {' '.join(args.scenes)} --rounds {args.rounds} "
+             f"--ref {args.ref} --tolerances {' '.join(f'{t:g}' for t in args.tolerances)}` "
+             f"(8 x 8 meshes, order 1; reference: {args.ref} uniform steps; error at T). "
+             "Ratios: the adaptive run's steps (accepted + rejected) and time loop over the uniform run's that "
+             "reaches the same error (interpolated log-log; NaN: outside the uniform runs' range). Target: steps "
+             "<= 0.5, time <= 0.67, error <= tolerance.", ""]
+    for scene, d in data.items():
+        lines += [f"## {scene}", "", "| tolerance | levels | rejected | error | reliable | steps ratio | time ratio |",
+                  "|---|---|---|---|---|---|---|"]
+        for a in d["adaptive"]:
+            lines.append(f"| {a['tolerance']:g} | {a['levels']} | {a['rejected']} | {a['error']:.3g} | "
+                         f"{'yes' if a['reliable'] else 'NO'} | {a['steps_ratio']:.2f} | {a['time_ratio']:.2f} |")
+        lines += ["", "| uniform steps | error | time loop [s] |", "|---|---|---|"]
+        for u in d["uniform"]:
+            lines.append(f"| {u['steps']} | {u['error']:.3g} | {u['loop']:.2f} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--ref", type=int, default=2560)
+    p.add_argument("--tolerances", type=float, nargs="+", default=TOLERANCES)
+    p.add_argument("--out", default=str(ROOT / "benchmarks/results/adaptive_work_precision"))
+    args = p.parse_args()
+    TOLERANCES[:] = args.tolerances
+    data, out = {}, Path(args.out)
+    for scene in args.scenes:  # written after each scene: a study cut short keeps the scenes it finished
+        data[scene] = study(scene, args.rounds, args.ref)
+        out.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float) + "\n")
+        out.with_suffix(".md").write_text(markdown(data, args))
+        chart(data, ROOT / "docs/figures/adaptive_work_precision.png")
+        print(markdown({scene: data[scene]}, args), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""The step controller of adaptive runs (solver/run/adaptive.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+from solver.config import load
+from solver.run.adaptive import SMOOTH_SHARE, Snapshot, StepController, load_kinks
+from solver.run.model import build_model
+from solver.run.stepper import Stepper, levels
+
+
+def _scene(*sets):
+    return load(ROOT / "configs/hard.toml", ["mesh.nx=6", "mesh.ny=6", "time.T=0.6", "time.k=0.01",
+                                             "time.adaptive=true", *sets])
+
+
+def test_steps_land_on_table_kinks_output_times_and_T_and_meet_the_tolerance(comm):
+    cfg = _scene("time.tolerance=1e-2", "output.times=[0.25]")
+    assert load_kinks(cfg) == [0.5]
+    rows = list(levels(build_model(cfg, comm)))
+    t = [r["t"] for r in rows]
+    assert 0.25 in t and 0.5 in t and t[-1] == 0.6 and all(b > a for a, b in zip(t, t[1:]))
+    assert np.allclose(np.cumsum([r["k"] for r in rows]), t, rtol=0, atol=1e-12)
+    tol, T = 1e-2, 0.6
+    checked = [r for r in rows[3:] if r["error_estimate"] > SMOOTH_SHARE * tol * r["k"] / T]
+    # a level beyond its per-unit-step share is an event, paid from the quarter of the tolerance kept for them
+    assert sum(r["error_estimate"] for r in checked) <= (1 - SMOOTH_SHARE) * tol
+
+
+def test_a_rejected_trial_is_undone_exactly(comm):
+    """Snapshot, a trial step, restore, the same step again: the same numbers as the step taken once."""
+    cfg = _scene("time.order=2")
+    a, b = build_model(cfg, comm), build_model(cfg, comm)
+    sa, sb = Stepper(a), Stepper(b)
+    for s in (sa, sb):
+        s.step(0, 0.0, 0.0, None)
+        s.step(1, 0.01, 0.01, None)
+    snap = Snapshot(b)
+    sb.step(2, 0.05, 0.04, 0.01)  # a trial that is thrown away
+    snap.restore()
+    ra, rb = sa.step(2, 0.03, 0.02, 0.01), sb.step(2, 0.03, 0.02, 0.01)
+    assert ra["contact_force"] == pytest.approx(rb["contact_force"], rel=1e-12)
+    assert np.allclose(a.u.x.array, b.u.x.array, rtol=1e-12, atol=1e-14)
+    assert np.allclose(a.history.M.x.array, b.history.M.x.array, rtol=1e-12, atol=1e-14)
+
+
+def test_the_step_grid_and_bounds(comm):
+    c = StepController(build_model(_scene("time.k_max=0.1", "time.k_min=0.001"), comm))
+    for k in (0.5, 0.0123, 1e-5):
+        s = c._snap(k)
+        assert 0.001 <= s <= 0.1 and (s <= k or s == 0.001)
+        j = np.log2(s / 0.6) * 8
+        assert s in (0.001, 0.1) or abs(j - round(j)) < 1e-9
