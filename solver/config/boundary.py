@@ -14,7 +14,7 @@ from solver.laws.contact import CONTACT_LAWS, ContactLaw
 from .contact import AXES, CONTACT_KEYS, INTERPOLATIONS, LAWS, OBSTACLES, contact_values
 from .fields import Ctx, check_keys, number, string, vector
 from .mesh import MeshConfig
-from .tables import DataTable, given_as_file, inline, read_csv, row_error
+from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error
 
 __all__ = ["AXES", "BOX_FACES", "FACE_AXIS", "FREE", "INTERPOLATIONS", "LAWS", "OBSTACLES", "PAPER_BOUNDARIES", "ROLES",
            "SIDES", "BoundaryConfig", "Table", "face_bounds", "parse", "table_at", "time_table", "to_toml"]
@@ -150,7 +150,7 @@ def time_table(ctx: Ctx, key: str, v: Any, dim: int, base: Path | None = None,
         if not isinstance(v[0], list):
             return ((0.0, *vector(ctx, key, v, dim)),)
         rows = inline(ctx, key, v, dim + 1, f"[{', '.join(labels)}]")
-    times = np.array([r[0] for r in rows])
+    times = as_array(rows)[:, 0]
     back = np.flatnonzero(times[1:] < times[:-1])
     if len(back):
         i = int(back[0]) + 1

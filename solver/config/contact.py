@@ -12,7 +12,7 @@ from solver.laws.contact import CONTACT_LAWS
 
 from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
-from .tables import given_as_file, inline, read_csv, row_error
+from .tables import as_array, given_as_file, inline, read_csv, row_error
 
 LAWS = tuple(CONTACT_LAWS)  # the contact laws' names
 AXES = ("x", "y", "z")
@@ -101,7 +101,7 @@ def _gap_table(ctx: Ctx, key: str, v: Any, base: Path) -> tuple[tuple[float, flo
             raise ctx.fail(key, v, "must be a number, a table of rows [s, g] (piecewise linear in s) or "
                            "{file = 'profile.csv', columns = [s, g]}")
         rows = inline(ctx, key, v, 2, "[s, g]")
-    s = np.array([r[0] for r in rows])
+    s = as_array(rows)[:, 0]
     down = np.flatnonzero(s[1:] <= s[:-1])
     if len(down):
         i = int(down[0]) + 1

@@ -12,7 +12,7 @@ from solver.errors import ConfigError
 from solver.laws.memory import MemoryIntegrand
 
 from .fields import Ctx, check_keys, names, need, number, string, vector
-from .tables import given_as_file, inline, read_csv, row_error
+from .tables import as_array, given_as_file, inline, read_csv, row_error
 from .time import PRONY_KERNELS, memory_rule
 
 KERNELS = ("none", "constant", "exponential", "tabulated")
@@ -94,7 +94,7 @@ def _table(ctx: Ctx, v: object, base: Path) -> tuple[tuple[float, float], ...]:
         table = inline(ctx, key, v, 2, "[s, g(s)]")
     if len(table) < 2:
         raise ctx.fail(key, v if not given_as_file(v) else f"{len(table)} row", "needs at least two rows [s, g(s)]")
-    s = np.array([r[0] for r in table])
+    s = as_array(table)[:, 0]
     if s[0] != 0:
         raise row_error(ctx, key, table, 0, float(s[0]), "s must start at 0 and increase strictly")
     down = np.flatnonzero(s[1:] <= s[:-1])

@@ -133,6 +133,8 @@ def _copy(v: Any) -> Any:
     """A deep copy of a parsed document (tables of rows copied row by row: copy.deepcopy takes 0.3 s for 10⁵ rows)."""
     if isinstance(v, dict):
         return {k: _copy(x) for k, x in v.items()}
+    if isinstance(v, tomlread.Rows):
+        return v  # the scene reader's own rows, which nobody else holds: shared, not copied (0.1 s for 10⁵ rows)
     if isinstance(v, list):
         if v and all(type(r) is list for r in v) and all(type(x) in (float, int) for x in v[0]):
             if all(type(x) in (float, int) for r in v for x in r):
@@ -267,6 +269,10 @@ class _Inline(dict):
     """A table written inline ({file = ...}), not as a [section]."""
 
 
+class _Verbatim(str):
+    """A value's TOML text, written as it is (a big inline table as the scene gave it)."""
+
+
 _BIG = 16  # tables of more rows are written by _array: tomlkit's Array.insert re-indexes the array per element
 
 
@@ -276,6 +282,10 @@ def _toml(data: dict) -> str:
     big: dict[str, list] = {}
 
     def cut(v: Any) -> Any:
+        if isinstance(v, _Verbatim):
+            mark = f"@@table-{len(big)}@@"
+            big[mark] = v
+            return mark
         if isinstance(v, _Inline):
             out = tomlkit.inline_table()
             out.update({k: cut(x) for k, x in v.items()})
@@ -292,7 +302,7 @@ def _toml(data: dict) -> str:
 
     text = tomlkit.dumps(cut(data))
     for mark, rows in big.items():
-        text = text.replace(f'"{mark}"', _array(rows), 1)
+        text = text.replace(f'"{mark}"', rows if isinstance(rows, _Verbatim) else _array(rows), 1)
     return text
 
 
@@ -335,8 +345,8 @@ def dumps_referring(cfg: Config) -> tuple[str, dict[str, tuple[DataTable, bool]]
         while name in copies:
             i += 1
             name = f"{stem}-{i}.csv"
-        if table.file is None:  # given inline: stays inline
-            return [list(r) for r in table]
+        if table.file is None:  # given inline: stays inline (a big one as the scene wrote it)
+            return _Verbatim(table.text) if table.text is not None else [list(r) for r in table]
         as_file = unchanged(table)
         copies[name] = (table, as_file)
         return _Inline(reference(table, name, as_file))

@@ -23,6 +23,7 @@ import numpy as np
 from solver.errors import ConfigError
 
 from .fields import Ctx, check_keys, string
+from .tomlread import Rows
 
 TABLE_KEYS = ("file", "columns")
 
@@ -44,11 +45,12 @@ class DataTable(tuple):
 
     file: TableFile | None
     labels: tuple[str, ...]
+    text: str | None  # the rows' TOML text as the scene gave them (big inline tables), written back as it is
 
     def __new__(cls, rows: Any = (), file: TableFile | None = None, labels: tuple[str, ...] = (),
-                array: np.ndarray | None = None) -> DataTable:
+                array: np.ndarray | None = None, text: str | None = None) -> DataTable:
         obj = super().__new__(cls, rows)
-        obj.file, obj.labels, obj._array = file, tuple(labels), array
+        obj.file, obj.labels, obj._array, obj.text = file, tuple(labels), array, text
         return obj
 
     def __reduce__(self):
@@ -85,8 +87,10 @@ def row_error(ctx: Ctx, key: str, rows: tuple, i: int, value: Any, allowed: str)
 def inline(ctx: Ctx, key: str, v: list, width: int, what: str) -> tuple[tuple[float, ...], ...]:
     """Rows of ``width`` finite numbers given inline; the error names the first bad row (``what``: the row's form).
 
-    Whole arrays are checked by numpy first (a 10⁵-row table in a few milliseconds); only a failing one is walked
-    row by row to name its first bad entry."""
+    Whole arrays are checked by numpy first (a 10⁵-row table in a few milliseconds; rows the scene reader already
+    read with numpy are taken as they are); only a failing one is walked row by row to name its first bad entry."""
+    if isinstance(v, Rows) and v.array.ndim == 2 and v.array.shape[1] == width:
+        return DataTable(map(tuple, v), array=v.array, text=v.text)
     if all(type(r) is list and len(r) == width and all(type(x) in (float, int) for x in r) for r in v):
         a = np.asarray(v, dtype=float)
         if a.ndim == 2 and np.isfinite(a).all():

@@ -23,6 +23,18 @@ _PLAIN = re.compile(r"[0-9eE+\-., \t\r\n\[\]]*")  # the only characters a fast-r
 _MARK = "@@campo-table-"
 
 
+class Rows(list):
+    """The rows of a big table as lists of floats, with the numpy array they were read into (``array``) and their
+    text in the scene (``text``): what :func:`solver.config.tables.inline` and the resolved scene's writer reuse."""
+
+    array: np.ndarray
+    text: str
+
+    def __init__(self, rows: list, array: np.ndarray, text: str) -> None:
+        super().__init__(rows)
+        self.array, self.text = array, text
+
+
 def _table(chars: str) -> np.ndarray:
     """A lookup table: byte -> whether it is one of ``chars``."""
     out = np.zeros(256, dtype=bool)
@@ -99,7 +111,9 @@ def _rows(text: str, start: int) -> tuple[int, list] | None:
         return None
     if a.size != len(opens) * width or not np.isfinite(a).all():
         return None
-    return end, a.reshape(-1, width).tolist()
+    a = a.reshape(-1, width)
+    a.flags.writeable = False
+    return end, Rows(a.tolist(), a, span)
 
 
 def _numbers(b: np.ndarray, inside: np.ndarray) -> bool:

@@ -116,3 +116,13 @@ def test_big_tables_are_written_and_read_in_linear_time():
             fast_loads(f"a = [{rows}, {bad}]\n")
     odd = f'a = """\nb = [{rows}]\n"""\n'  # the array inside a string stays a string
     assert fast_loads(odd) == tomllib.loads(odd)
+
+
+def test_a_big_inline_table_is_written_back_as_the_scene_gave_it():
+    rows = ",\n ".join(f"[{i}, {i}.25e-3]" for i in range(2 * BIG))
+    doc = fast_loads(f'[boundary.left]\nrole = "clamped"\n[boundary.bottom]\nrole = "contact"\n'
+                     f'gap_coordinate = "x"\ngap = [{rows}]\n')
+    cfg = from_dict(doc)
+    text, copies = dumps_referring(cfg)
+    assert f"gap = [{rows}]" in text and not copies
+    assert from_dict(tomllib.loads(text)).contact == cfg.contact
