@@ -14,7 +14,7 @@ from solver.laws.contact import CONTACT_LAWS, ContactLaw
 from .contact import AXES, CONTACT_KEYS, INTERPOLATIONS, LAWS, OBSTACLES, contact_values
 from .fields import Ctx, check_keys, number, string, vector
 from .mesh import MeshConfig
-from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error
+from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error, rows_given
 
 __all__ = ["AXES", "BOX_FACES", "FACE_AXIS", "FREE", "INTERPOLATIONS", "LAWS", "OBSTACLES", "PAPER_BOUNDARIES", "ROLES",
            "SIDES", "BoundaryConfig", "Table", "face_bounds", "parse", "table_at", "time_table", "to_toml"]
@@ -144,10 +144,10 @@ def time_table(ctx: Ctx, key: str, v: Any, dim: int, base: Path | None = None,
     if given_as_file(v):
         rows = read_csv(ctx, key, v, base or Path.cwd(), labels)
     else:
-        if not isinstance(v, list) or not v:
+        if not isinstance(v, (list, DataTable)) or not v:
             raise ctx.fail(key, v, f"must be a vector of {dim} numbers, a table of rows [t, f_1..f_{dim}] or "
                            "{file = 'table.csv', columns = [...]}")
-        if not isinstance(v[0], list):
+        if not rows_given(v) and not isinstance(v[0], list):
             return ((0.0, *vector(ctx, key, v, dim)),)
         rows = inline(ctx, key, v, dim + 1, f"[{', '.join(labels)}]")
     times = as_array(rows)[:, 0]
@@ -267,8 +267,8 @@ def _displacement(ctx: Ctx, key: str, b: dict, dim: int, base: Path) -> tuple[Ta
             comps.append(None)
         elif given_as_file(c):
             comps.append(time_table(ctx, ck, c, 1, base, ("t", f"u_{AXES[i]}")))
-        elif isinstance(c, list):
-            if not c or not all(isinstance(r, list) for r in c):
+        elif isinstance(c, (list, DataTable)):
+            if not rows_given(c):
                 raise ctx.fail(ck, c, "a table must be rows [t, value] (or give a number, or 'free')")
             comps.append(time_table(ctx, ck, c, 1, base, ("t", f"u_{AXES[i]}")))
         elif isinstance(c, str):

@@ -12,7 +12,7 @@ from solver.laws.contact import CONTACT_LAWS
 
 from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
-from .tables import as_array, given_as_file, inline, read_csv, row_error
+from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error, rows_given
 
 LAWS = tuple(CONTACT_LAWS)  # the contact laws' names
 AXES = ("x", "y", "z")
@@ -38,7 +38,7 @@ def contact_values(ctx: Ctx, sec: str, b: dict, side: str, mesh: MeshConfig, dim
         if "gap" in b or "gap_coordinate" in b or "gap_interpolation" in b:
             raise ctx.fail(f"{sec}.obstacle", b["obstacle"], "an obstacle replaces gap, gap_coordinate, gap_interpolation")
         values["obstacle"] = _obstacle(ctx, f"{sec}.obstacle", b["obstacle"], dim)
-    elif isinstance(gap, list) or given_as_file(gap):
+    elif isinstance(gap, (list, DataTable)) or given_as_file(gap):
         values["gap_interpolation"] = string(ctx, f"{sec}.gap_interpolation", b.get("gap_interpolation", "linear"),
                                              INTERPOLATIONS)
         values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap, base)
@@ -97,7 +97,7 @@ def _gap_table(ctx: Ctx, key: str, v: Any, base: Path) -> tuple[tuple[float, flo
     if given_as_file(v):
         rows = read_csv(ctx, key, v, base, ("s", "g"))
     else:
-        if not v or not all(isinstance(r, list) for r in v):
+        if not rows_given(v):
             raise ctx.fail(key, v, "must be a number, a table of rows [s, g] (piecewise linear in s) or "
                            "{file = 'profile.csv', columns = [s, g]}")
         rows = inline(ctx, key, v, 2, "[s, g]")

@@ -12,7 +12,7 @@ from solver.errors import ConfigError
 from solver.laws.memory import MemoryIntegrand
 
 from .fields import Ctx, check_keys, names, need, number, string, vector
-from .tables import as_array, given_as_file, inline, read_csv, row_error
+from .tables import as_array, given_as_file, inline, read_csv, row_error, rows_given
 from .time import PRONY_KERNELS, memory_rule
 
 KERNELS = ("none", "constant", "exponential", "tabulated")
@@ -89,7 +89,7 @@ def _table(ctx: Ctx, v: object, base: Path) -> tuple[tuple[float, float], ...]:
     if given_as_file(v):
         table = read_csv(ctx, key, v, base, ("s", "g"))
     else:
-        if not isinstance(v, list) or not all(isinstance(r, list) for r in v):
+        if not rows_given(v):
             raise ctx.fail(key, v, "needs at least two rows [s, g(s)], or {file = 'kernel.csv', columns = [s, g]}")
         table = inline(ctx, key, v, 2, "[s, g(s)]")
     if len(table) < 2:

@@ -133,8 +133,8 @@ def _copy(v: Any) -> Any:
     """A deep copy of a parsed document (tables of rows copied row by row: copy.deepcopy takes 0.3 s for 10⁵ rows)."""
     if isinstance(v, dict):
         return {k: _copy(x) for k, x in v.items()}
-    if isinstance(v, tomlread.Rows):
-        return v  # the scene reader's own rows, which nobody else holds: shared, not copied (0.1 s for 10⁵ rows)
+    if isinstance(v, DataTable):
+        return v  # the scene reader's big tables: immutable
     if isinstance(v, list):
         if v and all(type(r) is list for r in v) and all(type(x) in (float, int) for x in v[0]):
             if all(type(x) in (float, int) for r in v for x in r):
@@ -254,8 +254,8 @@ Refer = Callable[[str, DataTable], Any]
 def _lists(v: Any, refer: Refer | None = None, path: str = "") -> Any:
     """Tuples as lists, all the way down (what a TOML writer takes); with ``refer``, each table of rows (a
     :class:`DataTable`) is replaced by what ``refer(path, table)`` returns (its dotted key ``path``)."""
-    if refer is not None and isinstance(v, DataTable):
-        return refer(path, v)
+    if isinstance(v, DataTable):
+        return refer(path, v) if refer is not None else v.array.tolist()
     if isinstance(v, dict):
         return {k: _lists(x, refer, f"{path}.{k}" if path else k) for k, x in v.items()}
     if isinstance(v, (list, tuple)):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,6 @@ import numpy as np
 from solver.errors import ConfigError
 
 from .fields import Ctx, check_keys, string
-from .tomlread import Rows
 
 TABLE_KEYS = ("file", "columns")
 
@@ -38,36 +38,79 @@ class TableFile:
     stamp: tuple[int, int] = (0, 0)
 
 
-class DataTable(tuple):
-    """A table's rows: a tuple of tuples of floats, equal to the same rows given inline, that keeps them as a numpy
-    array too (:attr:`array`) and, when read from a file, remembers it (``file``) and its columns' names
-    (``labels``)."""
+class DataTable(Sequence):
+    """A table's rows held as a read-only (rows, columns) float array (:attr:`array`), seen as a tuple of tuples of
+    floats: ``len``, indexing (a row is a tuple), iteration, and equality with the same rows inline (a tuple of
+    tuples). A 10⁵-row table is then never 10⁵ Python tuples (0.1–0.2 s to make, and to hash at every cache look-up).
+    Read from a file it remembers it (``file``) and its columns' names (``labels``); read inline by the scene reader,
+    its TOML text (``text``), written back as it is. Immutable: copies are itself.
+    """
 
-    file: TableFile | None
-    labels: tuple[str, ...]
-    text: str | None  # the rows' TOML text as the scene gave them (big inline tables), written back as it is
+    __slots__ = ("_array", "file", "labels", "text", "_hash")
 
-    def __new__(cls, rows: Any = (), file: TableFile | None = None, labels: tuple[str, ...] = (),
-                array: np.ndarray | None = None, text: str | None = None) -> DataTable:
-        obj = super().__new__(cls, rows)
-        obj.file, obj.labels, obj._array, obj.text = file, tuple(labels), array, text
-        return obj
-
-    def __reduce__(self):
-        return (DataTable, (tuple(self), self.file, self.labels))
+    def __init__(self, rows: Any = (), file: TableFile | None = None, labels: tuple[str, ...] = (),
+                 array: np.ndarray | None = None, text: str | None = None) -> None:
+        a = np.array(list(rows), dtype=float, ndmin=2) if array is None else np.asarray(array, dtype=float)
+        if a.size == 0:
+            a = a.reshape(0, 0)
+        a.flags.writeable = False
+        self._array, self.file, self.labels, self.text = a, file, tuple(labels), text
+        self._hash: int | None = None
 
     @property
     def array(self) -> np.ndarray:
-        """The rows as a read-only (rows, columns) float array (made once)."""
-        if self._array is None:
-            self._array = np.array(self, dtype=float, ndmin=2)
-        self._array.flags.writeable = False
+        """The rows as a read-only (rows, columns) float array."""
         return self._array
+
+    def __array__(self, dtype=None) -> np.ndarray:
+        return self._array if dtype is None else self._array.astype(dtype)
+
+    def __len__(self) -> int:
+        return len(self._array)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return tuple(map(tuple, self._array[i].tolist()))
+        return tuple(self._array[i].tolist())
+
+    def __iter__(self):
+        return map(tuple, self._array.tolist())
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, DataTable):
+            return self._array.shape == other._array.shape and bool(np.array_equal(self._array, other._array))
+        if isinstance(other, (tuple, list)):
+            return len(other) == len(self) and all(tuple(a) == tuple(b) for a, b in zip(self, other))
+        return NotImplemented
+
+    def __hash__(self) -> int:
+        """The hash of the tuple of tuples it equals (computed once)."""
+        if self._hash is None:
+            self._hash = hash(tuple(self))
+        return self._hash
+
+    def __repr__(self) -> str:
+        where = f" from {self.file.path}" if self.file is not None else ""
+        return f"DataTable({len(self)} rows{where})"
+
+    def __reduce__(self):
+        return (DataTable, ((), self.file, self.labels, self._array, self.text))
+
+    def __copy__(self) -> DataTable:
+        return self
+
+    def __deepcopy__(self, memo) -> DataTable:
+        return self
 
 
 def as_array(rows: tuple) -> np.ndarray:
     """A table's rows as a float array (a DataTable's own, without copying)."""
     return rows.array if isinstance(rows, DataTable) else np.asarray(rows, dtype=float)
+
+
+def rows_given(v: Any) -> bool:
+    """Whether a table key's value is rows given inline: a list of lists, or the scene reader's big table."""
+    return isinstance(v, DataTable) or (isinstance(v, list) and bool(v) and all(isinstance(r, list) for r in v))
 
 
 def given_as_file(v: Any) -> bool:
@@ -89,13 +132,14 @@ def inline(ctx: Ctx, key: str, v: list, width: int, what: str) -> tuple[tuple[fl
 
     Whole arrays are checked by numpy first (a 10⁵-row table in a few milliseconds; rows the scene reader already
     read with numpy are taken as they are); only a failing one is walked row by row to name its first bad entry."""
-    if isinstance(v, Rows) and v.array.ndim == 2 and v.array.shape[1] == width:
-        return DataTable(map(tuple, v), array=v.array, text=v.text)
+    if isinstance(v, DataTable):  # read by the scene reader (solver.config.tomlread): numbers already
+        if v.array.shape[1] != width:
+            raise ctx.fail(f"{key}[0]", list(v[0]), f"must be a row {what}: {width} numbers")
+        return v
     if all(type(r) is list and len(r) == width and all(type(x) in (float, int) for x in r) for r in v):
         a = np.asarray(v, dtype=float)
         if a.ndim == 2 and np.isfinite(a).all():
-            a.flags.writeable = False
-            return DataTable(map(tuple, a.tolist()), array=a)
+            return DataTable(array=a)
     from .fields import vector  # the row-by-row check names the first bad row
 
     return tuple(_row(ctx, f"{key}[{i}]", r, width, what, vector) for i, r in enumerate(v))
@@ -148,8 +192,7 @@ def read_csv(ctx: Ctx, key: str, v: Any, base: Path, labels: tuple[str, ...]) ->
     rows.flags.writeable = False
     names = tuple(header[1][j] for j in picked) if header else labels
     stat = path.stat()
-    return DataTable(map(tuple, rows.tolist()), TableFile(str(path.resolve()), columns, (stat.st_size, stat.st_mtime_ns)),
-                     names, rows)
+    return DataTable((), TableFile(str(path.resolve()), columns, (stat.st_size, stat.st_mtime_ns)), names, rows)
 
 
 def _data_lines(text: str, first_only: bool = False) -> tuple[list[tuple[int, str]], tuple[int, list[str]] | None]:

@@ -4,8 +4,9 @@ tomllib parses a 10⁵-row table ``[[s, g], ...]`` in about 0.6 s (a fifth of a 
 reads the same numbers in milliseconds. :func:`loads` cuts each array of rows of plain numbers with more than
 :data:`BIG` rows out of the text, parses the rest with tomllib and puts the rows back as lists of floats. Anything
 it is not sure of (a sign of an unusual number, a comment in the array, the cut landing in a string) leaves the text
-to tomllib whole, which then reads or refuses it as before; so the result is tomllib's, with a table's integers as
-floats (the table keys read numbers as floats anyway).
+to tomllib whole, which then reads or refuses it as before; so the result is tomllib's, except that such a table is a
+:class:`solver.config.tables.DataTable` (a tuple of tuples of floats to whoever reads it, its integers as floats: the
+table keys read numbers as floats anyway), which keeps its text to write it back as it was.
 """
 
 from __future__ import annotations
@@ -16,23 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from .tables import DataTable
+
 BIG = 1000  # arrays of more rows are read by numpy
 _START = re.compile(r"=[ \t]*(\[[ \t\r\n]*\[)")  # a value that is an array of arrays
 _END = re.compile(r"\][ \t\r\n]*,?[ \t\r\n]*\]")  # the end of a row, then the end of the array
 _PLAIN = re.compile(r"[0-9eE+\-., \t\r\n\[\]]*")  # the only characters a fast-read array may hold
 _MARK = "@@campo-table-"
-
-
-class Rows(list):
-    """The rows of a big table as lists of floats, with the numpy array they were read into (``array``) and their
-    text in the scene (``text``): what :func:`solver.config.tables.inline` and the resolved scene's writer reuse."""
-
-    array: np.ndarray
-    text: str
-
-    def __init__(self, rows: list, array: np.ndarray, text: str) -> None:
-        super().__init__(rows)
-        self.array, self.text = array, text
 
 
 def _table(chars: str) -> np.ndarray:
@@ -111,31 +102,33 @@ def _rows(text: str, start: int) -> tuple[int, list] | None:
         return None
     if a.size != len(opens) * width or not np.isfinite(a).all():
         return None
-    a = a.reshape(-1, width)
-    a.flags.writeable = False
-    return end, Rows(a.tolist(), a, span)
+    return end, DataTable(array=a.reshape(-1, width), text=span)
 
 
 def _numbers(b: np.ndarray, inside: np.ndarray) -> bool:
-    """Whether the characters inside the rows are decimal numbers as TOML writes them, separated by commas."""
-    digit, sep, sign, exp = _DIGITS[b], _SEPS[b], _SIGNS[b], _EXP[b]
-    before = np.concatenate(([True], sep[:-1]))  # the character before is a separator (or none)
-    prev_digit = np.concatenate(([False], digit[:-1]))
-    next_digit = np.concatenate((digit[1:], [False]))
-    prev_exp = np.concatenate(([False], exp[:-1]))
-    next_sign = np.concatenate((sign[1:], [False]))
-    next2_digit = np.concatenate((digit[2:], [False, False]))
-    dot = b == _DOT
-    if (dot & ~(prev_digit & next_digit)).any():
+    """Whether the characters inside the rows are decimal numbers as TOML writes them, separated by commas: each
+    rule looked up around the positions of its character only (a dot, an exponent, a sign, a zero)."""
+    if (~inside & ~_SEPS[b]).any():
+        return False  # between the rows: separators only
+    padded = np.concatenate(([ord(" ")] * 2, b, [ord(" ")] * 2)).astype(np.uint8)  # a separator before and after
+    digit, sep = _DIGITS[padded], _SEPS[padded]
+
+    def at(c: int) -> np.ndarray:
+        return np.flatnonzero(padded == c)
+
+    dots = at(_DOT)
+    if not (digit[dots - 1] & digit[dots + 1]).all():
         return False
-    if (exp & ~(prev_digit & (next_digit | (next_sign & next2_digit)))).any():
+    exps = np.concatenate((at(ord("e")), at(ord("E"))))
+    after = digit[exps + 1] | (_SIGNS[padded[exps + 1]] & digit[exps + 2])
+    if not (digit[exps - 1] & after).all():
         return False
-    if (sign & ~((before | prev_exp) & next_digit)).any():
+    signs = np.concatenate((at(ord("+")), at(ord("-"))))
+    if not ((sep[signs - 1] | _EXP[padded[signs - 1]]) & digit[signs + 1]).all():
         return False
-    prev_sign = np.concatenate(([False], sign[:-1]))
-    before_sign = np.concatenate(([True, True], sep[:-2]))
-    starts = before | (prev_sign & before_sign)  # a digit that starts a number
-    return not ((b == _ZERO) & starts & next_digit).any() and not (~inside & ~sep).any()
+    zeros = at(_ZERO)
+    starts = sep[zeros - 1] | (_SIGNS[padded[zeros - 1]] & sep[zeros - 2])  # a zero that starts a number
+    return not (starts & digit[zeros + 1]).any()
 
 
 def _put_back(v: Any, cuts: list, found: set[int]) -> Any:

@@ -51,10 +51,11 @@ def _spline(table: tuple):
     """The not-a-knot cubic spline through a table (built once per table)."""
     from scipy.interpolate import CubicSpline
 
-    if table not in _SPLINES:
+    key = id(table)  # by identity, as gap_function's cache
+    if key not in _SPLINES or _SPLINES[key][0] is not table:
         rows = as_array(table)
-        _SPLINES[table] = CubicSpline(rows[:, 0], rows[:, 1])
-    return _SPLINES[table]
+        _SPLINES[key] = (table, CubicSpline(rows[:, 0], rows[:, 1]))
+    return _SPLINES[key][1]
 
 
 def _obstacle(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
@@ -130,10 +131,10 @@ def gap_function(part: BoundaryConfig, geo, degree: int) -> float | fem.Function
     if not varying(part):
         return part.gap
     cache = _FIELDS.setdefault(geo.mesh, {})
-    key = (part, degree)
-    if key not in cache:
-        cache[key] = _fill(part, geo, degree)
-    return cache[key]
+    key = (id(part), degree)  # by identity: hashing a part hashes its table (10⁵ rows: 0.2 s)
+    if key not in cache or cache[key][0] is not part:
+        cache[key] = (part, _fill(part, geo, degree))
+    return cache[key][1]
 
 
 def _monomials(X: np.ndarray, k: int) -> np.ndarray:
