@@ -123,6 +123,8 @@ class _Writers:
         self.out.close(quiet=not finished)
         if self.csv is not None:
             self.csv.close()
+        if self.profile is not None:
+            self.profile.close()
 
 
 def _write_scene(files: ResultsDir, cfg) -> None:
