@@ -143,39 +143,13 @@ cd "$repo"
 "$PY" - "$work/run" "$work/reference" <<'EOF'
 """The requeued run's CSV columns and node fields at every written level against the uninterrupted run's (1e-12)."""
 import sys
-from pathlib import Path
 
-import numpy as np
+from solver.post.compare import compare_runs
 
-from solver.post.results import read_csv, read_results
-
-run, ref = Path(sys.argv[1]), Path(sys.argv[2])
-NOT_COMPARED = ("wall_time", "factorizations")  # a restart factorizes its matrix again: the counter differs
-ra, rb = read_csv(run / "timeseries.csv"), read_csv(ref / "timeseries.csv")
-assert len(ra) == len(rb), (len(ra), len(rb))
-worst = 0.0
-for x, y in zip(ra, rb):
-    for c in y:
-        if c.startswith("time_") or c in NOT_COMPARED:
-            continue
-        a, b = float(x[c]), float(y[c])
-        assert abs(a - b) <= 1e-12 * max(abs(b), 1.0), (x["step"], c, a, b)
-        worst = max(worst, abs(a - b) / max(abs(b), 1.0))
-ga, gb = read_results(run), read_results(ref)
-assert ga["times"] == gb["times"]
-xa, xb = np.round(ga["geometry"], 12), np.round(gb["geometry"], 12)
-oa, ob = np.lexsort(xa.T[::-1]), np.lexsort(xb.T[::-1])
-assert np.array_equal(xa[oa], xb[ob])
-for name, values in gb["fields"].items():
-    if ga["fields"][name][gb["times"][0]].shape[0] != len(xa):
-        continue  # cell fields: computed from the node fields
-    for t, v in values.items():
-        scale = max(np.abs(v).max(initial=0.0), 1.0)
-        d = float(np.abs(ga["fields"][name][t][oa] - v[ob]).max(initial=0.0)) / scale
-        assert d <= 1e-12, (name, t, d)
-        worst = max(worst, d)
-print(f"check-slurm: {len(rb)} levels and {len(gb['times'])} written fields equal the uninterrupted run's "
-      f"(worst relative difference {worst:.1e})")
+diff = compare_runs(sys.argv[1], sys.argv[2])
+assert diff.same, diff.differences[:5]
+print(f"check-slurm: {diff.levels} levels and {diff.written} written fields equal the uninterrupted run's "
+      f"(worst relative difference {diff.worst:.1e})")
 EOF
 stop_daemons  # before the pid files go with the scratch folder
 rm -rf "$work"

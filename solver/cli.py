@@ -1,4 +1,4 @@
-"""Command line: ``python -m solver {run,check,plot,paraview} ...``; runs under mpirun.
+"""Command line: python -m solver {run,check,plot,paraview} ...; runs under mpirun.
 
 The studies and benchmarks behind the published figures are ``python -m studies`` in a checkout.
 
@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 from mpi4py import MPI
 from tqdm import tqdm
@@ -47,8 +48,30 @@ def _setup_logging(comm: MPI.Comm, verbose: bool) -> None:
         h.setLevel(logging.DEBUG if verbose else logging.WARNING)
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="solver", description=__doc__.splitlines()[0])
+class OneLineParser(argparse.ArgumentParser):
+    """An argparse parser whose mistakes are one line on stderr and exit code 2, like every other bad input.
+
+    ``argv`` (set before parsing) lets a message add what was probably meant: ``--set time.k 0.01`` leaves
+    ``0.01`` unrecognized, where ``--set time.k=0.01`` was meant."""
+
+    argv: list[str] = []
+
+    def error(self, message: str) -> NoReturn:
+        hint = ""
+        if message.startswith("unrecognized arguments"):
+            loose = [v for o, v in zip(self.argv, self.argv[1:]) if o == "--set" and "=" not in v]
+            if loose:
+                at = self.argv.index(loose[0])
+                value = self.argv[at + 1] if at + 1 < len(self.argv) else "VALUE"
+                hint = f" (--set takes SECTION.KEY=VALUE as one word: --set {loose[0]}={value})"
+        if MPI.COMM_WORLD.rank == 0:  # under mpirun, one line, not one per rank
+            sys.stderr.write(f"error: {self.prog}: {message}{hint}; see {self.prog} --help\n")
+        self.exit(2)
+
+
+def _parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    OneLineParser.argv = list(argv or [])
+    p = OneLineParser(prog="solver", description=__doc__.splitlines()[0])
     p.add_argument("--version", action="version", version=f"solver {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
@@ -268,6 +291,11 @@ def main(argv: list[str] | None = None) -> int:
         return paraview_main(argv[1:])
     if argv[:1] == ["plot"]:
         missing = [m for m in ("matplotlib", "pyvista") if not _installed(m)]
+        if missing and sys.prefix == sys.base_prefix:  # not a virtual environment: not the project's Python
+            print(f"error: plot needs {' and '.join(missing)}, which this Python ({sys.executable}) does not see: "
+                  "run the project's environment, .venv/bin/python -m solver plot (make install makes it)",
+                  file=sys.stderr)
+            return 2
         if missing:
             print(f"error: plot needs {' and '.join(missing)}, which this installation leaves out (a slim image, or "
                   "make install PLOTS=0): install the plotting extra (make install PLOTS=1), or plot with the full "
@@ -276,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
         from solver.post.plots import main as plot_main
 
         return plot_main(argv[1:])
-    args = _parser().parse_args(argv)
+    args = _parser(argv).parse_args(argv)
     try:
         if args.command == "check":
             return cmd_check(args, comm)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import subprocess
@@ -142,3 +143,26 @@ def checkpointed(cfg, comm, directory, levels: int):
         stepper.step(n)
     checkpoint.write(directory, model, levels - 1, (levels - 1) * cfg.time.k, part=0)
     return model, stepper, build_model(cfg, comm)
+
+
+@contextlib.contextmanager
+def read_only(path: Path):
+    """``path`` read-only for this process for the block, as a folder another user made is: mode bits for a user,
+    a read-only bind mount for root (who writes through mode bits); skips the test where neither can be done."""
+    if os.geteuid() != 0:
+        mode = path.stat().st_mode
+        path.chmod(0o555)
+        try:
+            yield "Permission denied"
+        finally:
+            path.chmod(mode)
+        return
+    bind = subprocess.run(["mount", "--bind", str(path), str(path)], capture_output=True)
+    if bind.returncode:
+        pytest.skip("cannot bind-mount here to make a read-only folder")
+    try:
+        if subprocess.run(["mount", "-o", "remount,ro,bind", str(path)], capture_output=True).returncode:
+            pytest.skip("cannot remount read-only here")
+        yield "Read-only file system"
+    finally:
+        subprocess.run(["umount", str(path)], capture_output=True)

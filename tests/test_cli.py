@@ -192,6 +192,27 @@ def test_run_help_lists_the_files_of_the_layout():
 
 
 @pytest.mark.parametrize("nproc", [1, 2])
+@pytest.mark.parametrize("argv, line", [
+    (["run", "configs/example1.toml", "--set", "time.k", "0.01"],
+     "error: solver: unrecognized arguments: 0.01 (--set takes SECTION.KEY=VALUE as one word: --set time.k=0.01); "
+     "see solver --help"),
+    (["run", "configs/example1.toml", "--overwrite", "--restart"],
+     "error: solver run: argument --restart: not allowed with argument --overwrite; see solver run --help"),
+])
+def test_command_line_mistakes_are_one_line_exit_2(tmp_path, argv, line, nproc):
+    res = cli([*argv, "--output", str(tmp_path / "o")], nproc)
+    assert res.returncode == 2
+    ours = [ln for ln in res.stderr.splitlines() if ln.startswith("error")]
+    assert ours == [line], res.stderr
+    assert "usage:" not in res.stderr and not (tmp_path / "o").exists()
+
+
+def test_help_has_no_markup():
+    res = cli(["--help"])
+    assert res.returncode == 0 and "``" not in res.stdout and "python -m solver" in res.stdout
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
 def test_a_gap_table_from_a_file_is_copied_beside_the_results_and_runs_again(tmp_path, nproc):
     """A scene whose gap is a CSV file (relative to the scene) runs; its results folder holds config.toml and the
     table's copy it refers to; ``solver run DIR/config.toml`` runs the same scene to the same numbers; a

@@ -8,6 +8,7 @@ plan. Nothing is made in the directory before the plan is accepted: a refused to
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import tomllib
@@ -49,6 +50,8 @@ def launch(cfg: Config, comm: MPI.Comm, outdir: Path | None, overwrite: bool = F
     """Prepare ``outdir`` (None: a run in memory) and build the model of ``cfg``, planned first when it sets
     ``accuracy.tolerance``. ``overrides``: the ``--set`` strings, refused where they contradict a tolerance.
     ``info``: where the planner's progress goes. Refusals are :class:`solver.errors.UsageError`."""
+    if outdir is not None:
+        cfg = directed(cfg, outdir)
     if cfg.accuracy.enabled:
         return _planned(cfg, comm, outdir, overwrite, restart, overrides, wording, info)
     if restart:
@@ -57,6 +60,18 @@ def launch(cfg: Config, comm: MPI.Comm, outdir: Path | None, overwrite: bool = F
     if outdir is not None:
         prepare(comm, outdir, overwrite, restart, wording=wording)
     return Launched(cfg, model, None, ())
+
+
+def directed(cfg: Config, outdir: str | Path) -> Config:
+    """``cfg`` with ``output.directory`` = ``outdir``, so that the resolved config.toml written there names the
+    directory the run wrote (``solver run DIR/config.toml`` writes to DIR again, not to the scene's directory)."""
+    if cfg.output.directory == str(outdir):
+        return cfg
+    document = None
+    if cfg.document is not None:
+        document = dict(cfg.document)
+        document["output"] = {**document.get("output", {}), "directory": str(outdir)}
+    return dataclasses.replace(cfg, output=dataclasses.replace(cfg.output, directory=str(outdir)), document=document)
 
 
 def _planned(cfg: Config, comm: MPI.Comm, outdir: Path | None, overwrite: bool, restart: bool,

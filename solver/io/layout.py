@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from solver.config.scene import TABLES
-from solver.errors import OutputDirectoryError
+from solver.errors import OutputDirectoryError, UsageError
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -155,6 +155,18 @@ def prepare(comm: MPI.Comm, directory: Path, overwrite: bool = False, restart: b
     if problem is not None:
         message, kind, existing = problem
         raise OutputDirectoryError(message, Path(directory), kind, existing)
+
+
+def check_writable(directory: Path, what: str) -> None:
+    """Refuse (:class:`UsageError`, one line) a directory this process cannot make or write a file in: what
+    ``solver plot`` and ``solver paraview`` check before drawing. ``what`` names it for the user."""
+    if directory.exists() and not directory.is_dir():
+        raise UsageError(f"{what}: cannot write there (Not a directory)")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=directory).close()  # mode bits do not tell root, a read-only mount, an ACL
+    except OSError as exc:
+        raise UsageError(f"{what}: cannot write there ({exc.strerror or exc})") from None
 
 
 def _problem(out: ResultsDir, overwrite: bool, restart: bool, dry: bool,

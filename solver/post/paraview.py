@@ -16,7 +16,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from solver.errors import ResultsError
+from solver.errors import UsageError
+from solver.io.layout import check_writable
 from solver.io.xdmf import read_series
 
 SCRIPT = Path(__file__).with_name("paraview_script.py")
@@ -103,7 +104,8 @@ def virtual_display(xvfb: str) -> Iterator[str]:
 def check_results(argv: list[str]) -> int | None:
     """The script's command line parsed here, and the directory checked, before ParaView starts: an exit code for
     a command line argparse ends (``--help``: 0; a bad option: 2, its usage and error printed), else None. A
-    damaged results directory is a :class:`ResultsError` (the file and what is wrong): VTK's readers print pages of
+    damaged results directory is a :class:`ResultsError` (the file and what is wrong), an output that cannot be
+    written a :class:`UsageError`: VTK's readers print pages of
     errors, or abort, on a truncated ``.h5`` or an XDMF naming a missing file. The XML and every dataset's presence,
     type and shape are checked with h5py; the field values are not read."""
     spec = importlib.util.spec_from_file_location("paraview_script", SCRIPT)
@@ -111,14 +113,20 @@ def check_results(argv: list[str]) -> int | None:
     path = list(sys.path)
     try:
         spec.loader.exec_module(script)
-        given = Path(script.parse_args(argv).results)
+        args = script.parse_args(argv)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else 2
     finally:
         sys.path[:] = path  # the script drops this folder from the path
+    given = Path(args.results)
     series = given / "solution.xdmf" if given.is_dir() else given
     if series.is_file():  # no solution.xdmf: the script says so, after saying ParaView's Python modules are missing
         read_series(series, values=False)
+        out = Path(args.output) if args.output else series.parent / f"paraview_{args.field}.png"
+        what = f"--output {out}" if args.output else f"{out.parent} (give --output elsewhere)"
+        check_writable(out.parent, what)
+        if out.exists() and not os.access(out, os.W_OK):
+            raise UsageError(f"{what}: cannot write {out.name} there (Permission denied)")
     return None
 
 
@@ -126,12 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ParaView render with ``argv`` (default ``sys.argv[1:]``); returns its exit code (2 if ParaView is missing)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     exe = executable()
-    if exe is None:
+    if exe is None and not {"-h", "--help"} & set(argv):  # the help needs no ParaView
         print(NOT_INSTALLED, file=sys.stderr)
         return 2
     try:
         code = check_results(argv)
-    except ResultsError as exc:
+    except UsageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if code is not None:

@@ -271,7 +271,8 @@ def render(args: argparse.Namespace) -> int:
     name, reader = open_results(os.path.abspath(given), args.reader)
     times = timesteps(reader)
     print(f"reader: {name}")
-    print(f"time values ({len(times)}): [{', '.join(fmt(t) for t in times)}]")
+    shown_times = [fmt(t) for t in times] if len(times) <= 8 else [*map(fmt, times[:3]), "...", *map(fmt, times[-3:])]
+    print(f"time values ({len(times)}): [{', '.join(shown_times)}]")
     print(f"point arrays: {arrays(reader.PointData)}")
     print(f"cell arrays: {arrays(reader.CellData)}")
     t = _chosen_time(times, args.time)
@@ -303,8 +304,13 @@ def render(args: argparse.Namespace) -> int:
     fit_camera(view, tuple(f(a, c) for a, c, f in zip(wb, b, (min, max, min, max, min, max))), (W, H))
     out = args.output or os.path.join(os.path.dirname(given), f"paraview_{args.field}.png")
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    before = os.stat(out).st_mtime_ns if os.path.exists(out) else None
     pvs.Render(view)
     pvs.SaveScreenshot(out, view, ImageResolution=[W, H], TransparentBackground=0)
+    if not os.path.exists(out) or os.stat(out).st_mtime_ns == before:  # VTK only logs "Unable to open file"
+        print(f"error: {out}: ParaView could not write it", file=sys.stderr)
+        pvs.Delete(view)
+        return 2
     # delete the view before Python exits: left to the interpreter's teardown, Debian's X build fails with
     # "GLXBadContext" and exit code 1 although the PNG was written
     pvs.Delete(view)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from solver.errors import UsageError
-from solver.io.layout import ResultsDir
+from solver.io.layout import ResultsDir, check_writable
 from solver.post.charts import pyplot
 from solver.post.results import read_csv, read_profile, read_results  # no dolfinx here: VTK and dolfinx's C++ do not mix
 
@@ -189,7 +189,7 @@ def plot_results(directory: str | Path, warp: float | None = None, out: str | Pa
     res = read_results(directory)
     rows, profile = _read_tables(directory)
     nearest = [_nearest_level(res["times"], t) for t in extra_times]  # refused before anything is drawn
-    out.mkdir(parents=True, exist_ok=True)
+    check_writable(out, f"--output {out}" if out != directory else f"{directory} (give --output elsewhere)")
     w = warp if warp is not None else auto_warp(res)
     made = []
     for field, what in (("von_mises_elastic", "A eps(u)"), ("von_mises", "sigma = A eps(u) + memory")):

@@ -367,3 +367,17 @@ def test_replace_applies_the_checks_across_sections():
 def test_replace_without_a_document_uses_the_resolved_scene():
     cfg = Config(**{**from_dict({}).__dict__, "document": None})
     assert cfg.replace({"mesh": {"nx": 8}}).mesh.nx == 8
+
+
+def test_replace_merges_a_part_and_a_whole_part_changes_its_role():
+    """What docs/python.md says: a change merges key by key (role and gap kept), so a new role is refused; the
+    part written whole into a new scene takes it."""
+    cfg = load(EX1)
+    merged = cfg.replace({"boundary": {"bottom": {"mu": 1e-3}}})
+    assert merged.document["boundary"]["bottom"] == {**cfg.document["boundary"]["bottom"], "mu": 1e-3}
+    with pytest.raises(ConfigError) as err:
+        cfg.replace({"boundary": {"bottom": {"role": "traction", "traction": [0.0, 0.0]}}})
+    assert err.value.key == "boundary.bottom.gap" and "not used by role 'traction'" in str(err.value)
+    parts = {**cfg.document["boundary"], "bottom": {"role": "traction", "traction": [0.0, 0.0]}}
+    free = from_dict({**cfg.document, "boundary": parts}, source=cfg.source)
+    assert not free.contact and free == load(EX1, ['boundary.bottom={role="traction", traction=[0.0, 0.0]}'])

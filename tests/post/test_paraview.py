@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, read_only
 
 import solver.post.paraview as spv
 
@@ -95,6 +95,49 @@ def test_paraview_missing_is_one_line(monkeypatch, capsys):
     assert not spv.available()
     assert spv.main([str(ROOT / "results")]) == 2
     assert capsys.readouterr().err.strip() == spv.NOT_INSTALLED
+
+
+def test_paraview_help_needs_no_paraview(monkeypatch, capsys):
+    monkeypatch.setattr(spv.shutil, "which", lambda name: None)
+    assert spv.main(["--help"]) == 0
+    out = capsys.readouterr()
+    assert out.out.startswith("usage:") and "--field" in out.out and out.err == ""
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A tiny example-1 run (no ParaView needed)."""
+    out = tmp_path_factory.mktemp("tiny") / "r"
+    run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
+           "--set", "mesh.nx=4", "--set", "mesh.ny=4", "--set", "time.k=0.5"]
+    assert subprocess.run(run, cwd=ROOT, capture_output=True).returncode == 0
+    return out
+
+
+def test_paraview_refuses_an_output_it_cannot_write(tiny, tmp_path):
+    """Checked before ParaView starts: an --output through a file, and a results folder it cannot write."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(spv.UsageError, match=r"cannot write there \(Not a directory\)"):
+        spv.check_results([str(tiny), "--output", str(blocker / "pv.png")])
+    with read_only(tiny) as reason, pytest.raises(spv.UsageError) as err:
+        spv.check_results([str(tiny), "--field", "damage"])
+    assert str(err.value) == f"{tiny} (give --output elsewhere): cannot write there ({reason})"
+    assert spv.check_results([str(tiny), "--output", str(tmp_path / "pv.png")]) is None
+
+
+@pytest.mark.slow
+def test_paraview_never_reports_a_file_it_did_not_write(tiny, paraview, tmp_path, monkeypatch, capfd):
+    """The script itself (the check above skipped) on a folder it cannot write: VTK only logs "Unable to open
+    file"; the script says so in one line, exit 2, and never prints "wrote"."""
+    monkeypatch.setattr(spv, "check_results", lambda argv: None)
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    with read_only(ro):
+        code = spv.main([str(tiny), "--output", str(ro / "pv.png")])
+    out = capfd.readouterr()
+    assert code == 2 and "wrote" not in out.out, out.out[-1000:] + out.err[-1000:]
+    assert f"error: {ro / 'pv.png'}: ParaView could not write it" in out.err
 
 
 FAKE_PVBATCH = """#!/bin/sh

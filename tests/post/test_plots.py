@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, read_only
 
 pytestmark = pytest.mark.serial  # starts its own processes
 
@@ -87,3 +87,39 @@ def test_contact_profiles_draw_the_pressure_along_each_part(tmp_path):
 
     img = mpimg.imread(made[0])
     assert img.shape[0] > 300 and np.unique(img.reshape(-1, img.shape[-1]), axis=0).shape[0] > 50
+
+
+@pytest.mark.slow
+def test_plot_refuses_an_output_it_cannot_write(tmp_path):
+    """One line and exit 2 before drawing: an --output through a file, and a results folder it cannot write (made
+    by another user: the Dockerfile's plot example without --user)."""
+    pytest.importorskip("pyvista", reason="the plotting extra is not installed (make install PLOTS=0)")
+    out = tmp_path / "r"
+    run = [sys.executable, "-m", "solver", "run", "configs/example1.toml", "--output", str(out), "--no-progress",
+           "--set", "mesh.nx=4", "--set", "mesh.ny=4", "--set", "time.k=0.5"]
+    assert subprocess.run(run, cwd=ROOT, capture_output=True).returncode == 0
+    plot = [sys.executable, "-m", "solver", "plot", str(out)]
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    res = subprocess.run([*plot, "--output", str(blocker / "o")], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr == f"error: --output {blocker / 'o'}: cannot write there (Not a directory)\n"
+    before = sorted(p.name for p in out.iterdir())
+    with read_only(out) as reason:
+        res = subprocess.run(plot, cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr == f"error: {out} (give --output elsewhere): cannot write there ({reason})\n"
+    assert sorted(p.name for p in out.iterdir()) == before
+
+
+def test_plot_outside_the_venv_names_the_python_to_use(monkeypatch, capsys, tmp_path):
+    """Debian's python3 in the repository root imports the source folder but not the venv's plotting stack: the
+    message names the Python to use, not a slim image."""
+    from solver.cli import main
+
+    monkeypatch.setitem(sys.modules, "pyvista", None)
+    monkeypatch.setattr(sys, "base_prefix", sys.prefix)
+    assert main(["plot", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"this Python ({sys.executable}) does not see" in err
+    assert ".venv/bin/python -m solver plot" in err and "slim" not in err
