@@ -133,7 +133,7 @@ class ContactTraces:
         along the part (sorted by the coordinate that varies most; s the arc length from the first)."""
         a = self.pressure.x.array
         if self._order is None:  # the nodes' order along each part and their s: the geometry's, found once
-            self._order = self._profile_order()
+            self._order = self._profile_order() or {}  # {} on the other ranks: found (a collective call, once)
         local = {name: np.column_stack([self.gap.x.array[d], self.normal_displacement.x.array[d],
                                         self.penetration.x.array[d], a[d]]) for name, d in self.part_dofs.items()}
         gathered = self.comm.gather(local, root=0)
