@@ -232,3 +232,28 @@ def test_command_line_mistakes_are_one_line_exit_2(tmp_path, argv, line, nproc):
 def test_help_has_no_markup():
     res = cli(["--help"])
     assert res.returncode == 0 and "``" not in res.stdout and "python -m solver" in res.stdout
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_a_gap_table_from_a_file_is_copied_beside_the_results_and_runs_again(tmp_path, nproc):
+    """A scene whose gap is a CSV file (relative to the scene) runs; its results folder holds config.toml and the
+    table's copy it refers to; ``solver run DIR/config.toml`` runs the same scene to the same numbers; a
+    restart from DIR/config.toml into DIR is accepted (the same scene)."""
+    scene = tmp_path / "in" / "scene.toml"
+    scene.parent.mkdir()
+    s = np.linspace(0.0, 1.0, 2001)
+    (scene.parent / "profile.csv").write_text("x,g\n" + "".join(f"{a!r},{1e-4 * a * a!r}\n" for a in s))
+    text = open("configs/example1.toml").read().replace("gap = 0.0\n", 'gap = {file = "profile.csv"}\n')
+    scene.write_text(text)
+    first, again = tmp_path / "first", tmp_path / "again"
+    args = [*SMALL, "--set", "output.checkpoint_every=1"]
+    assert cli(["run", str(scene), "--output", str(first), *args], nproc).returncode == 0
+    assert (first / "tables" / "boundary.bottom.gap.csv").read_text() == (scene.parent / "profile.csv").read_text()
+    assert 'gap = {file = "tables/boundary.bottom.gap.csv"}' in (first / "config.toml").read_text()
+    res = cli(["run", str(first / "config.toml"), "--output", str(again), *args], nproc)
+    assert res.returncode == 0, res.stderr
+    a, b = read_csv(first / "timeseries.csv"), read_csv(again / "timeseries.csv")
+    for column in ("contact_force", "zeta_min", "strain_norm"):
+        assert [r[column] for r in a] == [r[column] for r in b], column
+    res = cli(["run", str(first / "config.toml"), "--output", str(first), "--restart", *args], nproc)
+    assert res.returncode == 0, res.stderr

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from solver.laws.contact import CONTACT_LAWS, ContactLaw
 
 from .contact import AXES, CONTACT_KEYS, INTERPOLATIONS, LAWS, OBSTACLES, contact_values
 from .fields import Ctx, check_keys, number, string, vector
 from .mesh import MeshConfig
+from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error, rows_given
 
 __all__ = ["AXES", "BOX_FACES", "FACE_AXIS", "FREE", "INTERPOLATIONS", "LAWS", "OBSTACLES", "PAPER_BOUNDARIES", "ROLES",
            "SIDES", "BoundaryConfig", "Table", "face_bounds", "parse", "table_at", "time_table", "to_toml"]
@@ -36,18 +41,21 @@ def table_at(rows: tuple[tuple[float, ...], ...], t: float) -> tuple[float, ...]
     """Value at time ``t`` of a table of rows ``[t, v_1, ...]``, linear in between, left-continuous at jumps."""
     if len(rows) == 1:
         return rows[0][1:]
-    times = [r[0] for r in rows]
-    if t <= times[0]:
+    if t <= rows[0][0]:
         return rows[0][1:]
-    if t >= times[-1]:
+    if t >= rows[-1][0]:
         # the first row with the last time: left limit at a final jump
-        return rows[times.index(times[-1])][1:]
-    i = next(j for j, tj in enumerate(times) if tj >= t)
-    if times[i] == t:
+        return rows[bisect_left(rows, rows[-1][0], key=_time)][1:]
+    i = bisect_left(rows, t, key=_time)  # the first row at or after t (O(log n): tables may come from files)
+    if rows[i][0] == t:
         return rows[i][1:]
-    t0, t1 = times[i - 1], times[i]
+    t0, t1 = rows[i - 1][0], rows[i][0]
     a = (t - t0) / (t1 - t0)
     return tuple((1 - a) * v0 + a * v1 for v0, v1 in zip(rows[i - 1][1:], rows[i][1:]))
+
+
+def _time(row: tuple[float, ...]) -> float:
+    return row[0]
 
 
 @dataclass(frozen=True)
@@ -128,18 +136,30 @@ class BoundaryConfig:
             c is not None and any(v != 0.0 for r in c for v in r[1:]) for c in self.displacement)
 
 
-def time_table(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[float, ...], ...]:
-    """A constant vector of ``dim`` numbers, or sorted rows ``[t, v_1..v_dim]`` (a time at most twice: a jump)."""
-    if not isinstance(v, list) or not v:
-        raise ctx.fail(key, v, f"must be a vector of {dim} numbers or a table of rows [t, f_1..f_{dim}]")
-    if not isinstance(v[0], list):
-        return ((0.0, *vector(ctx, key, v, dim)),)
-    rows = tuple(vector(ctx, f"{key}[{i}]", r, dim + 1) for i, r in enumerate(v))
-    times = [r[0] for r in rows]
-    if any(b < a for a, b in zip(times, times[1:])):
-        raise ctx.fail(key, times, "table times must be sorted (a repeated time makes a jump)")
-    if any(a == b == c for a, b, c in zip(times, times[1:], times[2:])):
-        raise ctx.fail(key, times, "a time may appear at most twice (one jump)")
+def time_table(ctx: Ctx, key: str, v: Any, dim: int, base: Path | None = None,
+               labels: tuple[str, ...] | None = None) -> tuple[tuple[float, ...], ...]:
+    """A constant vector of ``dim`` numbers, or sorted rows ``[t, v_1..v_dim]`` (a time at most twice: a jump),
+    inline or from a CSV file ``{file, columns}`` (found relative to ``base``; ``labels``: its columns' names)."""
+    labels = labels or ("t", *(f"f_{a}" for a in AXES[:dim]))
+    if given_as_file(v):
+        rows = read_csv(ctx, key, v, base or Path.cwd(), labels)
+    else:
+        if not isinstance(v, (list, DataTable)) or not v:
+            raise ctx.fail(key, v, f"must be a vector of {dim} numbers, a table of rows [t, f_1..f_{dim}] or "
+                           "{file = 'table.csv', columns = [...]}")
+        if not rows_given(v) and not isinstance(v[0], list):
+            return ((0.0, *vector(ctx, key, v, dim)),)
+        rows = inline(ctx, key, v, dim + 1, f"[{', '.join(labels)}]")
+    times = as_array(rows)[:, 0]
+    back = np.flatnonzero(times[1:] < times[:-1])
+    if len(back):
+        i = int(back[0]) + 1
+        raise row_error(ctx, key, rows, i, [times[i - 1], times[i]],
+                        "table times must be sorted (a repeated time makes a jump)")
+    thrice = np.flatnonzero((times[2:] == times[1:-1]) & (times[1:-1] == times[:-2]))
+    if len(thrice):
+        i = int(thrice[0]) + 2
+        raise row_error(ctx, key, rows, i, float(times[i]), "a time may appear at most twice (one jump)")
     return rows
 
 
@@ -152,7 +172,7 @@ def parse(ctx: Ctx, t: Any, scene: dict) -> tuple[BoundaryConfig, ...]:
         t = PAPER_BOUNDARIES
     if not isinstance(t, dict) or not t:
         raise ctx.fail("boundary", t, "must hold at least one [boundary.NAME] table")
-    out = [_part(ctx, name, b, mesh, dim) for name, b in t.items()]
+    out = [_part(ctx, name, b, mesh, dim, scene["base"]) for name, b in t.items()]
     _check_rigid_motions(ctx, out, dim)
     if mesh.kind == "rectangle":
         _check_overlaps(ctx, out, mesh)
@@ -173,7 +193,7 @@ def _check_rigid_motions(ctx: Ctx, parts: list[BoundaryConfig], dim: int) -> Non
                            f"with u_{axis} not 'free' (else the body can float)")
 
 
-def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryConfig:
+def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int, base: Path) -> BoundaryConfig:
     sec = f"boundary.{name}"
     b = check_keys(ctx, sec, b, _KEYS)
     if "role" not in b:
@@ -204,11 +224,11 @@ def _part(ctx: Ctx, name: str, b: Any, mesh: MeshConfig, dim: int) -> BoundaryCo
     if role == "traction":
         if "traction" not in b:
             raise ctx.fail(f"{sec}.traction", "<missing>", "a traction part needs a traction")
-        return replace(part, traction=time_table(ctx, f"{sec}.traction", b["traction"], dim))
+        return replace(part, traction=time_table(ctx, f"{sec}.traction", b["traction"], dim, base))
     if role == "displacement":
-        return replace(part, displacement=_displacement(ctx, f"{sec}.displacement", b, dim))
+        return replace(part, displacement=_displacement(ctx, f"{sec}.displacement", b, dim, base))
     if role == "contact":
-        return replace(part, **contact_values(ctx, sec, b, side, mesh, dim))
+        return replace(part, **contact_values(ctx, sec, b, side, mesh, dim, base))
     return part
 
 
@@ -232,8 +252,9 @@ def _patch(ctx: Ctx, key: str, v: Any, side: str, mesh: MeshConfig) -> tuple[tup
     return (out[0], out[1])
 
 
-def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, ...]:
-    """Per component: a number, a table of rows [t, value], or "free"; at least one component fixed."""
+def _displacement(ctx: Ctx, key: str, b: dict, dim: int, base: Path) -> tuple[Table | None, ...]:
+    """Per component: a number, a table of rows [t, value] (inline or {file, columns}), or "free"; at least one
+    component fixed."""
     if "displacement" not in b:
         raise ctx.fail(key, "<missing>", f"a displacement part needs displacement = [{', '.join(['u'] * dim)}]")
     v = b["displacement"]
@@ -244,10 +265,12 @@ def _displacement(ctx: Ctx, key: str, b: dict, dim: int) -> tuple[Table | None, 
         ck = f"{key}[{i}]"
         if c == FREE:
             comps.append(None)
-        elif isinstance(c, list):
-            if not c or not all(isinstance(r, list) for r in c):
+        elif given_as_file(c):
+            comps.append(time_table(ctx, ck, c, 1, base, ("t", f"u_{AXES[i]}")))
+        elif isinstance(c, (list, DataTable)):
+            if not rows_given(c):
                 raise ctx.fail(ck, c, "a table must be rows [t, value] (or give a number, or 'free')")
-            comps.append(time_table(ctx, ck, c, 1))
+            comps.append(time_table(ctx, ck, c, 1, base, ("t", f"u_{AXES[i]}")))
         elif isinstance(c, str):
             raise ctx.fail(ck, c, "a number, a table of rows [t, value], or 'free'")
         else:
@@ -298,14 +321,14 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
         if b.patch is not None:
             entry["interval"] = [list(r) for r in b.patch]
         if b.role == "traction":
-            entry["traction"] = [list(r) for r in b.traction]
+            entry["traction"] = b.traction  # rows (a file's stay a DataTable: scene.dumps_referring refers to them)
         if b.role == "displacement":
             entry["displacement"] = [_component_toml(c) for c in b.displacement]
         if b.role == "contact":
             if b.obstacle:
                 entry["obstacle"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in b.obstacle}
             elif b.gap_table:
-                entry["gap"], entry["gap_coordinate"] = [list(r) for r in b.gap_table], b.gap_coordinate
+                entry["gap"], entry["gap_coordinate"] = b.gap_table, b.gap_coordinate
                 if b.gap_interpolation != "linear":
                     entry["gap_interpolation"] = b.gap_interpolation
             else:
@@ -319,6 +342,6 @@ def to_toml(parts: tuple[BoundaryConfig, ...]) -> dict:
 def _component_toml(c: Table | None) -> Any:
     if c is None:
         return FREE
-    if len(c) == 1 and c[0][0] == 0.0:
+    if len(c) == 1 and c[0][0] == 0.0 and not isinstance(c, DataTable):
         return c[0][1]
-    return [list(r) for r in c]
+    return c

@@ -3,12 +3,16 @@ obstacle) and its compliance law, which the law's class reads and validates (sol
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from solver.laws.contact import CONTACT_LAWS
 
 from .fields import Ctx, check_keys, need, number, string, vector
 from .mesh import MeshConfig
+from .tables import DataTable, as_array, given_as_file, inline, read_csv, row_error, rows_given
 
 LAWS = tuple(CONTACT_LAWS)  # the contact laws' names
 AXES = ("x", "y", "z")
@@ -20,8 +24,9 @@ _LAW_PARAMETERS = tuple(dict.fromkeys(key for law in CONTACT_LAWS.values() for k
 CONTACT_KEYS = ("gap", "gap_coordinate", "gap_interpolation", "obstacle", "law", *_LAW_PARAMETERS)
 
 
-def contact_values(ctx: Ctx, sec: str, b: dict, side: str, mesh: MeshConfig, dim: int) -> dict[str, Any]:
-    """The BoundaryConfig fields of a contact part's table ``b`` (section ``sec``; ``side``: its side or face)."""
+def contact_values(ctx: Ctx, sec: str, b: dict, side: str, mesh: MeshConfig, dim: int, base: Path) -> dict[str, Any]:
+    """The BoundaryConfig fields of a contact part's table ``b`` (section ``sec``; ``side``: its side or face;
+    ``base``: the scene file's folder, where a gap table's file is found)."""
     name = string(ctx, f"{sec}.law", b.get("law", "linear"), LAWS)
     law = CONTACT_LAWS[name]
     for key in _LAW_PARAMETERS:
@@ -33,10 +38,10 @@ def contact_values(ctx: Ctx, sec: str, b: dict, side: str, mesh: MeshConfig, dim
         if "gap" in b or "gap_coordinate" in b or "gap_interpolation" in b:
             raise ctx.fail(f"{sec}.obstacle", b["obstacle"], "an obstacle replaces gap, gap_coordinate, gap_interpolation")
         values["obstacle"] = _obstacle(ctx, f"{sec}.obstacle", b["obstacle"], dim)
-    elif isinstance(gap, list):
+    elif isinstance(gap, (list, DataTable)) or given_as_file(gap):
         values["gap_interpolation"] = string(ctx, f"{sec}.gap_interpolation", b.get("gap_interpolation", "linear"),
                                              INTERPOLATIONS)
-        values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap)
+        values["gap_table"] = _gap_table(ctx, f"{sec}.gap", gap, base)
         values["gap_coordinate"] = _gap_coordinate(ctx, sec, b, side, mesh, dim)
     else:
         values["gap"] = number(ctx, f"{sec}.gap", gap)
@@ -87,13 +92,20 @@ def _obstacle(ctx: Ctx, key: str, v: Any, dim: int) -> tuple[tuple[str, Any], ..
     return tuple(out)
 
 
-def _gap_table(ctx: Ctx, key: str, v: list) -> tuple[tuple[float, float], ...]:
-    if not v or not all(isinstance(r, list) for r in v):
-        raise ctx.fail(key, v, "must be a number or a table of rows [s, g] (piecewise linear in s)")
-    rows = tuple(vector(ctx, f"{key}[{i}]", r, 2) for i, r in enumerate(v))
-    s = [r[0] for r in rows]
-    if any(b <= a for a, b in zip(s, s[1:])):
-        raise ctx.fail(key, s, "the coordinates s must increase strictly")
+def _gap_table(ctx: Ctx, key: str, v: Any, base: Path) -> tuple[tuple[float, float], ...]:
+    """Rows [s, g] inline or from a CSV file ({file, columns = [s, g]}), s increasing strictly."""
+    if given_as_file(v):
+        rows = read_csv(ctx, key, v, base, ("s", "g"))
+    else:
+        if not rows_given(v):
+            raise ctx.fail(key, v, "must be a number, a table of rows [s, g] (piecewise linear in s) or "
+                           "{file = 'profile.csv', columns = [s, g]}")
+        rows = inline(ctx, key, v, 2, "[s, g]")
+    s = as_array(rows)[:, 0]
+    down = np.flatnonzero(s[1:] <= s[:-1])
+    if len(down):
+        i = int(down[0]) + 1
+        raise row_error(ctx, key, rows, i, [rows[i - 1][0], rows[i][0]], "the coordinates s must increase strictly")
     return rows  # type: ignore[return-value]
 
 

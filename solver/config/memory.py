@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from solver.errors import ConfigError
 from solver.laws.kernels import KernelFit, KernelFitError, PowerKernel, TabulatedKernel
 from solver.laws.memory import MemoryIntegrand
 
 from .fields import Ctx, check_keys, names, need, number, string, vector
+from .tables import as_array, given_as_file, inline, read_csv, row_error, rows_given
 from .time import PRONY_KERNELS, memory_rule
 
 KERNELS = ("none", "constant", "exponential", "tabulated", "power")
@@ -101,12 +105,7 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
         for i, tau in enumerate(times):
             need(ctx, f"memory.times[{i}]", tau, tau > 0, "time constants must be > 0")
     elif kernel == "tabulated":
-        if "table" not in t or not isinstance(t["table"], list) or len(t["table"]) < 2:
-            raise ctx.fail("memory.table", t.get("table", "<missing>"), "needs at least two rows [s, g(s)]")
-        table = tuple(vector(ctx, f"memory.table[{i}]", r, 2) for i, r in enumerate(t["table"]))  # type: ignore[misc]
-        s = [r[0] for r in table]
-        if s[0] != 0 or any(b <= a for a, b in zip(s, s[1:])):
-            raise ctx.fail("memory.table", s, "s must start at 0 and increase strictly")
+        table = _table(ctx, t.get("table", "<missing>"), scene["base"])
     coefficient, exponent = d.coefficient, d.exponent
     if kernel == "power":
         coefficient = number(ctx, "memory.coefficient", t.get("coefficient", d.coefficient))
@@ -128,8 +127,29 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     return cfg
 
 
+def _table(ctx: Ctx, v: object, base: Path) -> tuple[tuple[float, float], ...]:
+    """Rows [s, g(s)] (inline or {file, columns}), at least two, s from 0 increasing strictly."""
+    key = "memory.table"
+    if given_as_file(v):
+        table = read_csv(ctx, key, v, base, ("s", "g"))
+    else:
+        if not rows_given(v):
+            raise ctx.fail(key, v, "needs at least two rows [s, g(s)], or {file = 'kernel.csv', columns = [s, g]}")
+        table = inline(ctx, key, v, 2, "[s, g(s)]")
+    if len(table) < 2:
+        raise ctx.fail(key, v if not given_as_file(v) else f"{len(table)} row", "needs at least two rows [s, g(s)]")
+    s = as_array(table)[:, 0]
+    if s[0] != 0:
+        raise row_error(ctx, key, table, 0, float(s[0]), "s must start at 0 and increase strictly")
+    down = np.flatnonzero(s[1:] <= s[:-1])
+    if len(down):
+        i = int(down[0]) + 1
+        raise row_error(ctx, key, table, i, [float(s[i - 1]), float(s[i])], "s must start at 0 and increase strictly")
+    return table  # type: ignore[return-value]
+
+
 def to_toml(m: MemoryConfig) -> dict:
-    out = dataclasses.asdict(m)
+    out = {f.name: getattr(m, f.name) for f in dataclasses.fields(m)}  # the table as it is (a file's: a DataTable)
     for key in _OPTIONAL:
         if key not in _USES[m.kernel]:
             out.pop(key)

@@ -31,10 +31,13 @@ MEANING: dict[str, str] = {
     "boundary.NAME.side": "which side (rectangle) or face (box) the part is on; default: the table's NAME",
     "boundary.NAME.interval": "a sub-interval [a, b] of the side (rectangle) or a sub-rectangle [[a0, a1], [b0, b1]] "
                               "of the face (box); default: all of it",
-    "boundary.NAME.traction": "surface traction f2 (role traction): a vector, or rows [t, f_x, f_y(, f_z)] linear in t",
-    "boundary.NAME.displacement": "prescribed u (role displacement): per component a table of rows [t, value], "
-                                  "or \"free\"",
-    "boundary.NAME.gap": "initial gap g to the foundation (role contact): a number, or rows [s, g] along gap_coordinate",
+    "boundary.NAME.traction": "surface traction f2 (role traction): a vector, or rows [t, f_x, f_y(, f_z)] linear in t"
+                              " (inline, or a CSV file {file = \"load.csv\", columns = [...]})",
+    "boundary.NAME.displacement": "prescribed u (role displacement): per component a number, a table of rows "
+                                  "[t, value] (inline or {file, columns}), or \"free\"",
+    "boundary.NAME.gap": "initial gap g to the foundation (role contact): a number, or rows [s, g] along gap_coordinate,"
+                         " inline or from a CSV file: {file = \"profile.csv\", columns = [\"x\", \"g\"]} (columns by"
+                         " header name or number from 1; the path relative to the scene file)",
     "boundary.NAME.gap_coordinate": "the coordinate (x, y or z) a tabulated gap is a function of",
     "boundary.NAME.gap_interpolation": "how a gap table is read between its rows: linear, or a C2 cubic spline for curved profiles",
     "boundary.NAME.obstacle": "an analytic rigid obstacle instead of a gap: {shape = plane, point, normal} or "
@@ -45,7 +48,8 @@ MEANING: dict[str, str] = {
     "boundary.NAME.exponent": "power law's exponent (>= 1)",
     "boundary.NAME.depth": "limited penetration: thickness of the soft layer before the stiff foundation",
     "boundary.NAME.mu_stiff": "limited penetration: compliance of the stiff foundation below the layer",
-    "body_force.f": "body force f0: rows [t, f_x, f_y(, f_z)] linear in t (one row: constant); empty: none",
+    "body_force.f": "body force f0: rows [t, f_x, f_y(, f_z)] linear in t (one row: constant), inline or "
+                    "{file, columns}; empty: none",
     "material.E": "Young's modulus of the elasticity tensor A",
     "material.nu": "Poisson's ratio (< 0.5)",
     "material.model": "plane stress or plane strain (2-D), or 3d",
@@ -61,8 +65,8 @@ MEANING: dict[str, str] = {
     "memory.kernel": "the memory kernel g in G = zeta(s) g(t - s) Phi_L(A eps(u(s))); none: no memory",
     "memory.weights": "constant: g = weights[0]; exponential: the Prony weights",
     "memory.times": "exponential: the Prony time constants (> 0)",
-    "memory.table": "tabulated: rows [s, g(s)], linear in between, constant after the last; run as a sum of "
-                    "exponentials (kernel_tolerance)",
+    "memory.table": "tabulated: rows [s, g(s)], linear in between, constant after the last; inline or {file, "
+                    "columns}; run as a sum of exponentials (kernel_tolerance)",
     "memory.coefficient": "power: c in g(s) = c s^-alpha (nonzero)",
     "memory.exponent": "power: alpha in g(s) = c s^-alpha, 0 < alpha < 1 (weakly singular: left rule only)",
     "memory.kernel_tolerance": "tabulated, power: the largest relative error |g~ - g| / |g| of the sum of exponentials "

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
+import re
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,7 +22,7 @@ import tomlkit
 
 from solver.errors import ConfigError
 
-from . import accuracy, body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time
+from . import accuracy, body_force, boundary, damage, discretization, material, memory, mesh, output, solver, time, tomlread
 from .accuracy import AccuracyConfig
 from .body_force import BodyForceConfig
 from .boundary import BoundaryConfig
@@ -32,6 +34,7 @@ from .memory import MemoryConfig
 from .mesh import MeshConfig
 from .output import OutputConfig
 from .solver import SolverConfig
+from .tables import DataTable, reference, unchanged
 from .time import TimeConfig
 
 
@@ -123,7 +126,21 @@ def from_dict(data: dict, source: str = "<dict>", base: Path | None = None) -> C
         if s.key == "mesh":
             m = scene["mesh"]
             scene["dim"] = mesh.gmsh_dim(m.file) if m.kind == "gmsh" else m.dim
-    return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source, document=copy.deepcopy(data), base=base)
+    return Config(**{s.attr: scene[s.key] for s in SECTIONS}, source=source, document=_copy(data), base=base)
+
+
+def _copy(v: Any) -> Any:
+    """A deep copy of a parsed document (tables of rows copied row by row: copy.deepcopy takes 0.3 s for 10⁵ rows)."""
+    if isinstance(v, dict):
+        return {k: _copy(x) for k, x in v.items()}
+    if isinstance(v, DataTable):
+        return v  # the scene reader's big tables: immutable
+    if isinstance(v, list):
+        if v and all(type(r) is list for r in v) and all(type(x) in (float, int) for x in v[0]):
+            if all(type(x) in (float, int) for r in v for x in r):
+                return [r[:] for r in v]
+        return [_copy(x) for x in v]
+    return copy.deepcopy(v)
 
 
 def parse_override(item: str) -> tuple[list[str], Any]:
@@ -166,7 +183,7 @@ def load(path: str | Path, overrides: list[str] | None = None) -> Config:
     except OSError as exc:  # a name too long, a directory without permission (found by the fuzzer)
         raise ConfigError(f"{str(path)[:200]}: cannot read the scene file ({exc.strerror or exc})") from None
     try:
-        data = tomllib.loads(text.decode("utf-8"))
+        data = tomlread.loads(text.decode("utf-8"))
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not a text (UTF-8) file") from None
     except tomllib.TOMLDecodeError as exc:
@@ -227,19 +244,115 @@ def merge(data: dict, changes: dict, ctx: Ctx | None = None, prefix: str = "") -
 
 
 def to_dict(cfg: Config) -> dict:
-    """The fully resolved scene as a TOML-shaped dictionary (round-trips through from_dict)."""
+    """The fully resolved scene as a TOML-shaped dictionary (round-trips through from_dict); tables inline."""
     return {s.key: _lists(s.to_toml(getattr(cfg, s.attr))) for s in SECTIONS}
 
 
-def _lists(v: Any) -> Any:
-    """Tuples as lists, all the way down (what a TOML writer takes)."""
+Refer = Callable[[str, DataTable], Any]
+
+
+def _lists(v: Any, refer: Refer | None = None, path: str = "") -> Any:
+    """Tuples as lists, all the way down (what a TOML writer takes); with ``refer``, each table of rows (a
+    :class:`DataTable`) is replaced by what ``refer(path, table)`` returns (its dotted key ``path``)."""
+    if isinstance(v, DataTable):
+        return refer(path, v) if refer is not None else v.array.tolist()
     if isinstance(v, dict):
-        return {k: _lists(x) for k, x in v.items()}
+        return {k: _lists(x, refer, f"{path}.{k}" if path else k) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_lists(x) for x in v]
+        if v and all(type(r) is tuple for r in v) and all(type(x) is float for x in v[0]):
+            return [list(r) for r in v]  # a table's rows (numbers only): one step, not one call per number
+        return [_lists(x, refer, f"{path}.{i}") for i, x in enumerate(v)]
     return v
 
 
+class _Inline(dict):
+    """A table written inline ({file = ...}), not as a [section]."""
+
+
+class _Verbatim(str):
+    """A value's TOML text, written as it is (a big inline table as the scene gave it)."""
+
+
+_BIG = 16  # tables of more rows are written by _array: tomlkit's Array.insert re-indexes the array per element
+
+
+def _toml(data: dict) -> str:
+    """TOML text of ``data`` in time linear in its size: tomlkit for the structure (arrays stay on one line), the
+    tables of more than _BIG rows formatted here."""
+    big: dict[str, list] = {}
+
+    def cut(v: Any) -> Any:
+        if isinstance(v, _Verbatim):
+            mark = f"@@table-{len(big)}@@"
+            big[mark] = v
+            return mark
+        if isinstance(v, _Inline):
+            out = tomlkit.inline_table()
+            out.update({k: cut(x) for k, x in v.items()})
+            return out
+        if isinstance(v, dict):
+            return {k: cut(x) for k, x in v.items()}
+        if isinstance(v, list):
+            if len(v) > _BIG and all(isinstance(r, list) for r in v):
+                mark = f"@@table-{len(big)}@@"
+                big[mark] = v
+                return mark
+            return [cut(x) for x in v]
+        return v
+
+    text = tomlkit.dumps(cut(data))
+    for mark, rows in big.items():
+        text = text.replace(f'"{mark}"', rows if isinstance(rows, _Verbatim) else _array(rows), 1)
+    return text
+
+
+def _array(rows: list) -> str:
+    """A table of rows of numbers as a one-line TOML array (Python's repr of a finite float is a TOML float)."""
+    return "[" + ", ".join("[" + ", ".join(map(repr, r)) + "]" for r in rows) + "]"
+
+
 def dumps(cfg: Config) -> str:
-    """TOML text of the resolved scene (written with tomlkit: arrays stay on one line)."""
-    return f"# resolved scene (from {cfg.source})\n" + tomlkit.dumps(to_dict(cfg))
+    """TOML text of the resolved scene, every table inline (written with tomlkit: arrays stay on one line; big
+    tables by hand, in linear time)."""
+    return f"# resolved scene (from {cfg.source})\n" + _toml(to_dict(cfg))
+
+
+def fingerprint(cfg: Config) -> str:
+    """The resolved scene as :func:`dumps` writes it, but each table of more than _BIG rows as its number of rows and
+    the SHA-256 of its numbers: what identifies a scene (a checkpoint's), in milliseconds for 10⁵-row tables."""
+    def digest(path: str, table: DataTable) -> Any:
+        if len(table) <= _BIG:
+            return [list(r) for r in table]
+        return {"rows": len(table), "sha256": hashlib.sha256(table.array.tobytes()).hexdigest()}
+
+    data = {s.key: _lists(s.to_toml(getattr(cfg, s.attr)), digest, s.key) for s in SECTIONS}
+    return f"# resolved scene (from {cfg.source})\n" + _toml(data)
+
+
+TABLES = "tables"  # where dumps_referring puts the tables read from files, beside the scene it writes
+
+
+def dumps_referring(cfg: Config) -> tuple[str, dict[str, tuple[DataTable, bool]]]:
+    """TOML text of the resolved scene in which each table read from a CSV file refers to a copy of it,
+    ``{file = "tables/<key>.csv"}``, and those copies: {relative name: (rows, whether the file is copied as it is)}
+    (written by :func:`solver.config.tables.write_copy`; a file changed since it was read is written from the rows
+    the run uses). Tables given inline stay inline."""
+    copies: dict[str, tuple[DataTable, bool]] = {}
+
+    def refer(path: str, table: DataTable) -> dict:
+        stem = f"{TABLES}/{re.sub(r'[^A-Za-z0-9._-]', '_', path)}"
+        name, i = f"{stem}.csv", 1
+        while name in copies:
+            i += 1
+            name = f"{stem}-{i}.csv"
+        if table.file is None:  # given inline: stays inline (a big one as the scene wrote it)
+            return _Verbatim(table.text) if table.text is not None else [list(r) for r in table]
+        as_file = unchanged(table)
+        copies[name] = (table, as_file)
+        return _Inline(reference(table, name, as_file))
+
+    data = {s.key: _lists(s.to_toml(getattr(cfg, s.attr)), refer, s.key) for s in SECTIONS}
+    head = f"# resolved scene (from {cfg.source})\n"
+    if copies:
+        head += f"# the tables read from files are copied to {TABLES}/ beside this file\n"
+    return head + _toml(data), copies

@@ -23,7 +23,8 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from solver.config import Config, OutputConfig, dumps
+from solver.config import Config, OutputConfig
+from solver.config.scene import fingerprint
 from solver.errors import ConfigError
 from solver.io import layout
 from solver.io.files import on_rank0
@@ -33,7 +34,7 @@ NAME = layout.CHECKPOINT
 
 def scene_hash(cfg: Config) -> str:
     """Hash of everything that defines the solution (not where or how often it is written)."""
-    text = dumps(replace(cfg, output=OutputConfig(), source=""))
+    text = fingerprint(replace(cfg, output=OutputConfig(), source=""))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

@@ -8,6 +8,7 @@ writes; the nodes of every rank are gathered to it.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from mpi4py import MPI
@@ -22,6 +23,7 @@ class ProfileWriter:
 
     def __init__(self, path: Path, comm: MPI.Comm, traces: ContactTraces, keep_step: int | None = None) -> None:
         self.path, self.comm, self.traces = path, comm, traces
+        self.fd: int | None = None  # rank 0: the file, open for appending while the run lasts
 
         def start() -> None:
             kept = []
@@ -29,6 +31,8 @@ class ProfileWriter:
                 kept = [ln for ln in path.read_text().splitlines(keepends=True)[1:]
                         if ln.endswith("\n") and int(ln.split(",", 1)[0]) <= keep_step]
             write_text_atomic(path, ",".join(PROFILE_COLUMNS) + "\n" + "".join(kept))
+            self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+            self.size = os.fstat(self.fd).st_size
 
         on_rank0(comm, start)
 
@@ -37,9 +41,20 @@ class ProfileWriter:
         parts = self.traces.profile()  # collective
 
         def append() -> None:
-            lines = [f"{step},{t!r},{name}," + ",".join(repr(float(v)) for v in row) + "\n"
-                     for name, rows in parts for row in rows]
-            with open(self.path, "a") as fh:
-                fh.write("".join(lines))
+            lead = f"{step},{float(t)!r},"
+            data = "".join(lead + name + "," + ",".join(map(repr, row)) + "\n"
+                           for name, rows in parts for row in rows.tolist()).encode()
+            try:
+                if os.write(self.fd, data) != len(data):
+                    raise OSError(28, "No space left on device (short write)", str(self.path))
+            except OSError:
+                os.ftruncate(self.fd, self.size)  # no partial level
+                raise
+            self.size += len(data)
 
         on_rank0(self.comm, append)
+
+    def close(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None

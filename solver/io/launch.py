@@ -20,8 +20,8 @@ import h5py
 from dolfinx.io import XDMFFile
 from mpi4py import MPI
 
-from solver.config import Config, to_dict
-from solver.errors import UsageError, show
+from solver.config import Config, from_dict, to_dict
+from solver.errors import ConfigError, UsageError, show
 from solver.io.checkpoint import scene_hash
 from solver.io.files import on_rank0, write_text_atomic
 from solver.io.layout import CLI, ResultsDir, Wording, prepare
@@ -137,6 +137,10 @@ def first_difference(cfg: Config, written: Path) -> str | None:
         old = tomllib.loads(written.read_text())
     except (OSError, ValueError):
         return None
+    try:  # its tables from files (tables/) read back, as cfg holds them
+        old = to_dict(from_dict(old, source=str(written), base=written.parent))
+    except ConfigError:
+        pass  # compared as written
 
     def walk(a, b, prefix: str) -> str | None:
         if isinstance(a, dict) and isinstance(b, dict):

@@ -11,6 +11,7 @@ A results directory holds (docs/guide/outputs.md)::
     timeseries.csv         one row a level (TIMESERIES_COLUMNS and the scene's own)
     contact.csv            the contact results along Γ_C at each written level (PROFILE_COLUMNS; scenes with contact)
     config.toml            the resolved scene
+    tables/*.csv           the rows of the tables the scene read from CSV files (config.toml refers to them)
     checkpoint.h5          the last checkpoint (``--restart`` continues from it)
     plan.json              what a tolerance chose (runs with accuracy.tolerance)
     mesh.xdmf, mesh.h5     the mesh a tolerance chose, with its boundary tags
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from solver.config.scene import TABLES
 from solver.errors import OutputDirectoryError, UsageError
 
 if TYPE_CHECKING:
@@ -44,6 +46,7 @@ PLAN = "plan.json"
 PLAN_MESH = ("mesh.xdmf", "mesh.h5")
 # the files a run writes at the top of the directory, in the order --help lists them
 TOP_FILES = (SOLUTION, CONTACT_SERIES, TIMESERIES, CONTACT, CONFIG, CHECKPOINT, PLAN, *PLAN_MESH)
+TABLE_PATTERN = "*.csv"  # in tables/: the copies of the tables read from files (solver.config.scene.dumps_referring)
 
 TIMESERIES_COLUMNS = (
     "step", "t", "newton_iterations", "linear_solves", "factorizations", "residual", "contact_force",
@@ -71,7 +74,7 @@ def timeseries_columns(model: Any, sensors: tuple = ()) -> tuple[str, ...]:
 def listing() -> str:
     """The files a run writes, as ``--help`` lists them."""
     return ", ".join((SOLUTION, *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS[:2]), CONTACT_SERIES,
-                      *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS[2:]), *TOP_FILES[2:]))
+                      *(f"{FIELDS}/{p}" for p in FIELD_PATTERNS[2:]), *TOP_FILES[2:], f"{TABLES}/{TABLE_PATTERN}"))
 
 
 @dataclass(frozen=True)
@@ -121,15 +124,18 @@ class ResultsDir:
         fields = self.path / FIELDS
         if fields.is_dir():
             found += sorted(p for pattern in FIELD_PATTERNS for p in fields.glob(pattern) if p.is_file())
+        tables = self.path / TABLES
+        if tables.is_dir():
+            found += sorted(p for p in tables.glob(TABLE_PATTERN) if p.is_file())
         return found
 
     def remove_written(self) -> None:
-        """Remove :meth:`written` (and fields/ if that leaves it empty)."""
+        """Remove :meth:`written` (and fields/, tables/ if that leaves them empty)."""
         for target in self.written():
             target.unlink()
-        fields = self.path / FIELDS
-        if fields.is_dir() and not any(fields.iterdir()):
-            fields.rmdir()
+        for folder in (self.path / FIELDS, self.path / TABLES):
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
 
 
 @dataclass(frozen=True)
@@ -188,7 +194,7 @@ def _problem(out: ResultsDir, overwrite: bool, restart: bool, dry: bool,
         elif out.path.is_dir():
             existing = out.written()
             if existing and not overwrite:
-                names = tuple(sorted({f"{FIELDS}/" if p.parent.name == FIELDS else p.name for p in existing}))
+                names = tuple(sorted({f"{p.parent.name}/" if p.parent != out.path else p.name for p in existing}))
                 how = f"pass {wording.overwrite} to replace them, "
                 how += f"{wording.restart} to continue them, " if wording.restart else ""
                 return (f"{where}: holds earlier results ({', '.join(names)}); {how}or choose another directory",

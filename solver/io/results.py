@@ -17,7 +17,8 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from solver.config import dumps
+from solver.config.scene import dumps_referring
+from solver.config.tables import write_copy
 from solver.errors import Interrupted, OutputError, SolveFailure
 from solver.io import checkpoint
 from solver.io.contact_profile import ProfileWriter
@@ -101,7 +102,7 @@ class _Writers:
         if files is not None:
             fit = model.history.kernel_fit if model.history is not None else None
             head = f"# memory.kernel = {cfg.memory.kernel!r} runs as {fit.summary()}\n" if fit is not None else ""
-            on_rank0(comm, lambda: write_text_atomic(files.config, head + dumps(cfg)))
+            on_rank0(comm, lambda: _write_scene(files, cfg, head))
         self.out = Outputs(model, cfg.material, cfg.output, outdir if cfg.output.xdmf else None, keep_until)
         columns = timeseries_columns(model, sensors)
         self.csv = CSVWriter(files.timeseries, comm, keep=keep, columns=columns) if files is not None else None
@@ -127,6 +128,19 @@ class _Writers:
         self.out.close(quiet=not finished)
         if self.csv is not None:
             self.csv.close()
+        if self.profile is not None:
+            self.profile.close()
+
+
+def _write_scene(files: ResultsDir, cfg, head: str = "") -> None:
+    """config.toml, the resolved scene (after ``head``, comment lines), and the copies of the tables it read from
+    files, which it refers to (tables/: ``solver run DIR/config.toml`` runs the same scene)."""
+    text, tables = dumps_referring(cfg)
+    for name, (rows, as_file) in tables.items():
+        path = files.path / name
+        path.parent.mkdir(exist_ok=True)
+        write_copy(rows, path, as_file)
+    write_text_atomic(files.config, head + text)
 
 
 def _stop_here(out: Outputs, outdir: Path | None, model: Model, n: int, t: float, part: int,

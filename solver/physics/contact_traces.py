@@ -63,6 +63,7 @@ class ContactTraces:
         self.penetration = fem.Function(S, name="penetration")
         self.x = S.tabulate_dof_coordinates()
         fdim = mesh.topology.dim - 1
+        self._order: dict[str, tuple[np.ndarray, np.ndarray]] | None = None  # rank 0: the profile's order (once)
         n_local = S.dofmap.index_map.size_local
         self.n_local = n_local
         self.part_dofs = {}  # per part: its owned dofs
@@ -138,17 +139,33 @@ class ContactTraces:
         """Per part on rank 0 (None elsewhere): rows (s, x, y, z, gap, u_ν, penetration, pressure) of its vertices in
         order along the part (sorted by the coordinate that varies most; s the arc length from the first)."""
         a = self.pressure.x.array
-        local = {name: np.column_stack([self.x[d], self.gap.x.array[d], self.normal_displacement.x.array[d],
+        if self._order is None:  # the nodes' order along each part and their s: the geometry's, found once
+            self._order = self._profile_order() or {}  # {} on the other ranks: found (a collective call, once)
+        local = {name: np.column_stack([self.gap.x.array[d], self.normal_displacement.x.array[d],
                                         self.penetration.x.array[d], a[d]]) for name, d in self.part_dofs.items()}
         gathered = self.comm.gather(local, root=0)
         if self.comm.rank != 0:
             return None
         out = []
         for part in self.parts:
-            rows = np.concatenate([g[part.name] for g in gathered])
-            rows = rows[np.lexsort(rows[:, 2::-1].T)] if len(rows) else rows.reshape(0, 7)
-            axis = int(np.argmax(np.ptp(rows[:, :3], axis=0))) if len(rows) else 0
-            rows = rows[np.argsort(rows[:, axis], kind="stable")]
-            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(rows[:, :3], axis=0), axis=1))])
-            out.append((part.name, np.column_stack([s, rows])))
+            order, head = self._order[part.name]
+            rows = np.concatenate([g[part.name] for g in gathered]).reshape(-1, 4)[order]
+            out.append((part.name, np.column_stack([head, rows])))
+        return out
+
+    def _profile_order(self) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+        """Per part on rank 0 (None elsewhere): the order of its gathered nodes along it (sorted by the coordinate that
+        varies most, ties by x, then y, then z) and the columns (s, x, y, z) of its nodes in that order."""
+        gathered = self.comm.gather({name: self.x[d] for name, d in self.part_dofs.items()}, root=0)
+        if self.comm.rank != 0:
+            return None
+        out = {}
+        for part in self.parts:
+            x = np.concatenate([g[part.name] for g in gathered]).reshape(-1, 3)
+            order = np.lexsort(x[:, 2::-1].T) if len(x) else np.zeros(0, dtype=np.intp)
+            axis = int(np.argmax(np.ptp(x, axis=0))) if len(x) else 0
+            order = order[np.argsort(x[order, axis], kind="stable")]
+            x = x[order]
+            s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])[: len(x)]
+            out[part.name] = (order, np.column_stack([s, x]))
         return out

@@ -21,12 +21,13 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
+from solver.config.boundary import AXES
 from solver.mesh.geometry import Geometry
 from solver.physics import contact
 from solver.physics.contact_points import ContactPoints
 from solver.physics.contact_traces import ContactTraces
 from solver.physics.displacement import DisplacementProblem
-from solver.physics.gap import interpolation_error
+from solver.physics.gap import ReachableError, segment_errors
 from solver.physics.material import strain
 from solver.physics.operators import Operators
 
@@ -101,6 +102,9 @@ class Reactions:
         return dict(zip(self.dirichlet.dofs, (float(v) for v in total)))
 
 
+ZONE = 1e-3  # λ_h above this fraction of the peak: the contact zone, as the gap table warning judges it
+
+
 class DisplacementDiagnostics:
     """What the time series reports about u at each level (all values the same on every rank)."""
 
@@ -115,7 +119,7 @@ class DisplacementDiagnostics:
         self.traces = ContactTraces(geo, u, parts, degree, pressure_floor) if parts else None
         self.parts = parts
         self._warned = False
-        self._table_errors = {part.name: interpolation_error(part) for part in parts}  # once, not in the loop
+        self._tables = _reachable_tables(self.traces, parts) if self.traces is not None else {}  # once, not per level
         self.peak_columns = ("peak_pressure",) + tuple(f"peak_pressure_{a}" for a in "xyz"[: geo.dim]) if parts else ()
         self.gram = None
         if strain_norm is None:
@@ -160,10 +164,29 @@ class DisplacementDiagnostics:
     def peak(self) -> dict[str, float]:
         """The largest contact pressure over Γ_C and its point (the traces as :meth:`row` updated them)."""
         value, x = self.traces.peak()
-        if not self._warned and value > 0:
-            self._warned = True
-            _warn_coarse_tables(self.parts, self._table_errors, value)
+        if not self._warned and value > 0 and self._tables:
+            self._warned = _warn_coarse_tables(self.parts, self._zone_errors(value), value)
         return dict(zip(self.peak_columns, (value, *(float(c) for c in x[: self.geo.dim]))))
+
+    def _zone_errors(self, peak: float) -> dict[str, float]:
+        """Per linear gap table: its largest interpolation error where the body is in contact at this level: over the
+        segments within the part's extent whose lower gap is at most the largest gap under the contact zone.
+
+        The zone is the trace nodes where λ_h > ZONE × the peak: λ_h is a projection, which rings beyond the zone's
+        edge, decaying about fourfold a node (measured on a Hertz contact), so the zone found is a few nodes wider
+        than the true one (on the safe side); u_ν − g is no signal (at the nodes it is the table's own chord error,
+        of either sign)."""
+        traces = self.traces
+        out = {}
+        for part in self.parts:
+            if part.name not in self._tables:
+                out[part.name] = 0.0
+                continue
+            dofs = traces.part_dofs[part.name]
+            g = traces.gap.x.array[dofs[traces.pressure.x.array[dofs] > ZONE * peak]]
+            reach = self.geo.comm.allreduce(float(g.max()) if len(g) else -np.inf, op=MPI.MAX)
+            out[part.name] = self._tables[part.name].up_to(reach)
+        return out
 
     def row(self) -> dict[str, float]:
         if self.traces is not None:
@@ -182,17 +205,35 @@ def allowed_penetration(part: BoundaryConfig, pressure: float) -> float:
     return part.contact_law.inverse(pressure)
 
 
-def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], errors: dict[str, float], pressure: float) -> None:
-    """One line per linear gap table whose interpolation error exceeds the penetration the law allows at the
-    peak pressure: the body then follows the table's kinks (docs/contact.md)."""
+def _reachable_tables(traces: ContactTraces, parts: tuple[BoundaryConfig, ...]) -> dict[str, ReachableError]:
+    """Per linear gap table: its segments' errors within the part's extent along the table's coordinate (the extent
+    of the part's trace nodes, the same on every rank)."""
+    out = {}
+    for part in parts:
+        if not len(segment_errors(part)[0]):
+            continue
+        x = traces.x[traces.part_dofs[part.name], AXES.index(part.gap_coordinate)]
+        lo = traces.comm.allreduce(float(x.min()) if len(x) else np.inf, op=MPI.MIN)
+        hi = traces.comm.allreduce(float(x.max()) if len(x) else -np.inf, op=MPI.MAX)
+        out[part.name] = ReachableError(part, lo, hi)
+    return out
+
+
+def _warn_coarse_tables(parts: tuple[BoundaryConfig, ...], errors: dict[str, float], pressure: float) -> bool:
+    """One line per linear gap table whose interpolation error (where the body can be in contact) exceeds the
+    penetration the law allows at the peak pressure: the body then follows the table's kinks (docs/contact.md).
+    Whether it warned."""
+    warned = False
     for part in parts:
         err, allowed = errors[part.name], allowed_penetration(part, pressure)
         if err > allowed:
+            warned = True
             logging.getLogger("solver").warning(
                 "warning: boundary.%s: the gap table's interpolation error (~%.2g) is %.0f times the penetration "
                 "its law allows at the peak pressure %.3g (%.2g): the pressure will follow the table's kinks; "
                 "sample it finer or set gap_interpolation = \"cubic\"", part.name, err, err / allowed, pressure,
                 allowed)
+    return warned
 
 
 class DamageDiagnostics:

@@ -18,13 +18,17 @@ def _files(directory) -> set[str]:
 
 
 def test_every_file_a_run_writes_is_known_and_overwrite_removes_them_all(comm, shared_tmp):
-    cfg = from_dict(SCENE)
+    if comm.rank == 0:  # a gap table from a file: its copy goes to tables/
+        (shared_tmp / "profile.csv").write_text("x,g\n0,0\n0.5,0\n1,0\n")
+    comm.barrier()
+    gap = {"gap": {"file": "profile.csv"}, "gap_coordinate": "x", "role": "contact", "mu": 1e-10}
+    cfg = from_dict({**SCENE, "boundary": {"left": {"role": "clamped"}, "bottom": gap}}, base=shared_tmp)
     model, _ = solve(cfg, comm, shared_tmp)
     comm.barrier()
     if comm.rank == 0:
-        written = _files(shared_tmp)
+        written = _files(shared_tmp) - {"profile.csv"}
         assert {"solution.xdmf", "timeseries.csv", "contact.csv", "config.toml", "checkpoint.h5",
-                "fields/mesh.h5", "fields/levels_000000.h5"} <= written, written
+                "fields/mesh.h5", "fields/levels_000000.h5", "tables/boundary.bottom.gap.csv"} <= written, written
         assert {str(p.relative_to(shared_tmp)) for p in ResultsDir(shared_tmp).written()} == written
         header = (shared_tmp / layout.TIMESERIES).read_text().splitlines()[0].split(",")
         assert tuple(header) == timeseries_columns(model)
@@ -35,7 +39,7 @@ def test_every_file_a_run_writes_is_known_and_overwrite_removes_them_all(comm, s
     comm.barrier()
     prepare(comm, shared_tmp, overwrite=True)
     if comm.rank == 0:
-        assert _files(shared_tmp) == {"notes.txt", "fields/mine.h5"}
+        assert _files(shared_tmp) == {"notes.txt", "fields/mine.h5", "profile.csv"}
 
 
 def test_the_writers_use_the_layouts_names():
@@ -43,7 +47,7 @@ def test_the_writers_use_the_layouts_names():
     assert layout.listing().split(", ") == ["solution.xdmf", "fields/mesh.h5", "fields/levels_*.h5", "contact.xdmf",
                                             "fields/contact_mesh.h5", "fields/contact_levels_*.h5", "timeseries.csv",
                                             "contact.csv", "config.toml", "checkpoint.h5", "plan.json", "mesh.xdmf",
-                                            "mesh.h5"]
+                                            "mesh.h5", "tables/*.csv"]
 
 
 def _earlier(comm, directory, *names) -> None:

@@ -109,3 +109,51 @@ def test_reactions_assemble_only_the_dirichlet_rows(comm, dim):
         full[cols] = want
         assert set(got_cols[got != 0.0]) == set(cols[want != 0.0])
         assert np.abs(got - full[got_cols]).max(initial=0.0) <= 1e-14 * scale
+
+
+def _hertz(table: list[list[float]], n: int = 24) -> dict:
+    """A half block (0,1) x (0,0.5) pushed 0.005 onto g = x²/2 (μ = 1e-8, P1): the contact zone is about |x| < 0.1."""
+    return {"mesh": {"corners": [[0.0, 0.0], [1.0, 0.5]], "nx": 2 * n, "ny": n},
+            "memory": {"kernel": "none"}, "damage": {"enabled": False}, "time": {"T": 1.0, "k": 1.0},
+            "material": {"E": 100.0, "nu": 0.3, "model": "plane_strain"},
+            "boundary": {"left": {"role": "displacement", "displacement": [0.0, "free"]},
+                         "top": {"role": "displacement", "displacement": ["free", -0.005]},
+                         "bottom": {"role": "contact", "mu": 1e-8, "gap": table, "gap_coordinate": "x"}}}
+
+
+def _rows(s: np.ndarray) -> list[list[float]]:
+    return [[float(a), float(a * a / 2)] for a in s]
+
+
+def _warnings(comm, table) -> list[str]:
+    import logging
+
+    records: list[logging.LogRecord] = []
+    handler = logging.Handler()
+    handler.emit = records.append  # type: ignore[method-assign]
+    logger = logging.getLogger("solver")
+    logger.addHandler(handler)
+    try:
+        model = build_model(from_dict(_hertz(table)), comm)
+        Stepper(model).step(0)
+        assert model.mech.diagnostics.peak()["peak_pressure"] > 0
+    finally:
+        logger.removeHandler(handler)
+    return [r.getMessage() for r in records if "interpolation error" in r.getMessage()]
+
+
+def test_table_coarse_only_where_the_body_cannot_reach_does_not_warn(comm):
+    """The Hertz scene with rows every 1e-4 where the contact is (x <= 0.15, g <= 0.011) and every 0.01 beyond, where
+    the gap is larger than anything under the contact zone: the coarse rows' error (~1.25e-5, ~400 times μ p) is out
+    of reach, no warning; the same profile every 0.01 throughout warns once, in one line."""
+    fine = np.concatenate([np.arange(0.0, 0.15, 1e-4), np.arange(0.15, 1.0 + 1e-9, 0.01)])
+    assert _warnings(comm, _rows(fine)) == []
+    coarse = _warnings(comm, _rows(np.arange(0.0, 1.0 + 1e-9, 0.01)))
+    assert len(coarse) == 1 and "\n" not in coarse[0] and "boundary.bottom" in coarse[0], coarse
+
+
+def test_table_coarse_inside_the_contact_zone_still_warns(comm):
+    """Fine rows far from the contact do not hide coarse ones under it: every 0.02 for x < 0.2, every 1e-4 beyond."""
+    rows = np.concatenate([np.arange(0.0, 0.2, 0.02), np.arange(0.2, 1.0 + 1e-9, 1e-4)])
+    found = _warnings(comm, _rows(rows))
+    assert len(found) == 1 and "boundary.bottom" in found[0], found
