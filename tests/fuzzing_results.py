@@ -32,7 +32,8 @@ from hypothesis import strategies as st
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE_FILES = ("solution.xdmf", "timeseries.csv", "contact.csv", "config.toml", "checkpoint.h5", "fields/mesh.h5",
-              "fields/levels_000000.h5", "fields/levels_000001.h5")
+              "fields/levels_000000.h5", "fields/levels_000001.h5", "contact.xdmf", "fields/contact_mesh.h5",
+              "fields/contact_levels_000000.h5", "fields/contact_levels_000001.h5")
 H5_FILES = ("fields/mesh.h5", "fields/levels_000000.h5", "fields/levels_000001.h5")
 CSV_FILES = ("timeseries.csv", "contact.csv")
 

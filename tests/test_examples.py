@@ -95,8 +95,13 @@ def test_outputs_open_with_meshio(tmp_path, fields):
     res = run_cli(["run", "configs/example1.toml", "--set", "mesh.nx=4", "--set", "mesh.ny=4",
                    "--set", "time.k=0.25", "--output", str(out), "--no-progress", *(ALL_FIELDS if fields == "all" else [])])
     assert res.returncode == 0, res.stderr
-    assert {p.name for p in out.iterdir()} == {"solution.xdmf", "fields", "timeseries.csv", "contact.csv", "config.toml",
-                                             "checkpoint.h5"}
+    assert {p.name for p in out.iterdir()} == {"solution.xdmf", "contact.xdmf", "fields", "timeseries.csv", "contact.csv",
+                                             "config.toml", "checkpoint.h5"}
+    with meshio.xdmf.TimeSeriesReader(str(out / "contact.xdmf")) as reader:  # Γ_C: the bottom's 5 vertices, 4 segments
+        points, cells = reader.read_points_cells()
+        assert points.shape[0] == 5 and cells[0].type == "line" and cells[0].data.shape == (4, 2)
+        t, point_data, _ = reader.read_data(reader.num_steps - 1)
+        assert t == 1.0 and {"contact_pressure", "gap", "penetration", "normal_displacement"} <= set(point_data)
     cell_fields = {"von_mises", "von_mises_elastic"} | ({"stress", "elastic_stress"} if fields == "all" else set())
     with meshio.xdmf.TimeSeriesReader(str(out / "solution.xdmf")) as reader:
         points, cells = reader.read_points_cells()

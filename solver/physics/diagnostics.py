@@ -102,7 +102,7 @@ class Reactions:
         return dict(zip(self.dirichlet.dofs, (float(v) for v in total)))
 
 
-ZONE = 1e-3  # λ_h above this fraction of the peak: the contact zone, as the gap table warning judges it
+ZONE = 1e-3  # the pressure above this fraction of the peak: the contact zone, as the gap table warning judges it
 
 
 class DisplacementDiagnostics:
@@ -172,10 +172,9 @@ class DisplacementDiagnostics:
         """Per linear gap table: its largest interpolation error where the body is in contact at this level: over the
         segments within the part's extent whose lower gap is at most the largest gap under the contact zone.
 
-        The zone is the trace nodes where λ_h > ZONE × the peak: λ_h is a projection, which rings beyond the zone's
-        edge, decaying about fourfold a node (measured on a Hertz contact), so the zone found is a few nodes wider
-        than the true one (on the safe side); u_ν − g is no signal (at the nodes it is the table's own chord error,
-        of either sign)."""
+        The zone is the trace nodes where the reported pressure > ZONE × the peak: a vertex's pressure is the mean
+        over its facets' quadrature points, so the zone found reaches one node beyond the true one (on the safe
+        side); u_ν − g at the nodes is no signal (it is the table's own chord error, of either sign)."""
         traces = self.traces
         out = {}
         for part in self.parts:
