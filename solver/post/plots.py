@@ -7,9 +7,9 @@
 - ``damage_final.png``: the damage at the final time (Figs. 6 and 9);
 - ``timeseries.png``: contact force, minimum damage and ||eps(u)|| against time;
 - ``contact_<part>.png`` (scenes with contact, from ``contact.csv``): in 2-D the pressure along the part at every
-  written level, coloured by t (a colour bar for t), the contact zone (u_ν > g) of the last one shaded, and below
+  written level, coloured by t (a colour bar for t), the contact zone (p > 0) of the last one shaded, and below
   it the gap g and the normal displacement u_ν at the last time; in 3-D a map of the contact face at the last
-  level, seen head-on, the pressure as colour and the contact zone's outline (u_ν = g).
+  level, seen head-on, the pressure as colour and the contact zone's outline (p = 0).
 
 Each picture has its own colour range (its minimum to its maximum, as the bar shows) and flat colours (no lighting),
 so that a pixel's colour is the colour bar's at its value. The displacement is drawn x w, the same w in every
@@ -190,7 +190,7 @@ def timeseries(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-PRESSURE_LABEL = "contact pressure $\\lambda_h$ (model units)"
+PRESSURE_LABEL = "contact pressure p (model units)"
 
 
 def contact_profiles(profile: dict, out: Path, dim: int = 2) -> list[Path]:
@@ -224,7 +224,7 @@ def _profile(plt, profile: dict, steps: list[int], part: str):
     active = last["penetration"] > 0
     if active.any():  # the zone of the last level: the segments between its active nodes (a node out of it breaks it)
         top.fill_between(last["s"], 0, 1, where=active, transform=top.get_xaxis_transform(), color="0.88",
-                         zorder=0, linewidth=0, label=f"contact zone $u_\\nu > g$ at t = {times[-1]:g}")
+                         zorder=0, linewidth=0, label=f"contact zone (p > 0) at t = {times[-1]:g}")
         top.legend(fontsize=8, loc="upper right")
     top.add_collection(lines)
     top.autoscale_view()
@@ -258,7 +258,7 @@ def face_coordinates(points: np.ndarray) -> tuple[np.ndarray, tuple[str, str]]:
 
 def contact_map(plt, level: dict, part: str):
     """The contact face seen head-on: the pressure as colour (Gouraud-interpolated between the nodes, unlit), the
-    contact zone's outline (u_ν = g) in black."""
+    contact zone's outline (p = 0) in black."""
     import matplotlib.tri as mtri
 
     xy, labels = face_coordinates(np.column_stack([level["x"], level["y"], level["z"]]))
@@ -273,7 +273,7 @@ def contact_map(plt, level: dict, part: str):
     note = "no node in contact"
     if (pen > 0).any() and (pen <= 0).any():
         ax.tricontour(tri, pen, levels=[0.0], colors="black", linewidths=1.5)
-        note = "black: contact zone's edge $u_\\nu = g$"
+        note = "black: the contact zone's edge (p = 0)"
     elif (pen > 0).all():
         note = "the whole face in contact"
     ax.plot(xy[:, 0], xy[:, 1], ".", color="0.3", ms=2)
