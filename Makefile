@@ -75,9 +75,9 @@ NETLIB_PATH := /usr/lib/$(MULTIARCH)/blas:/usr/lib/$(MULTIARCH)/lapack
 # Sandybridge (AVX) differs from the generic kernels a virtual processor gets and reproduced an AMD-only failure;
 # where the machine already forces Sandybridge, the generic SSE3 kernels (Prescott) are the other one
 OTHER_CORETYPE ?= $(if $(filter Sandybridge SANDYBRIDGE,$(OPENBLAS_CORETYPE)),Prescott,Sandybridge)
-PORTABLE_TESTS := tests/physics tests/solvers/test_damage.py tests/solvers/test_mechanics.py tests/solvers/test_condensed.py \
+PORTABLE_TESTS := tests/physics tests/laws tests/solvers/test_damage_step.py tests/solvers/test_mechanics.py tests/solvers/test_condensed.py \
 	tests/solvers/test_near_nullspace.py tests/solvers/test_auto.py tests/solvers/test_linear.py tests/solvers/test_energy_newton.py \
-	tests/solvers/test_damped_newton.py tests/run/test_stepper.py tests/run/test_accuracy.py tests/io/test_checkpoint.py \
+	tests/solvers/test_damped_newton.py tests/run/test_stepper.py tests/run/test_adaptive.py tests/run/test_accuracy.py tests/io/test_checkpoint.py \
 	tests/io/test_fields.py tests/mesh/test_geometry.py tests/mesh/test_adapt.py tests/test_api.py tests/test_examples.py \
 	tests/test_paper_claims.py
 PYTEST_PORTABLE := $(PY) -m pytest -q -p no:cacheprovider $(PORTABLE_TESTS)
