@@ -18,7 +18,7 @@
 #
 # P is the contact force (four times the quarter's, the reaction of the pushed face as a check); the contact
 # radius a is read from the contact force's distribution, a² = (5/2) ∫ p r² ds / ∫ p ds (Hertz's
-# p₀ √(1 − r²/a²) has exactly this second moment); the peak pressure is the written λ_h's maximum, and, beside
+# p₀ √(1 − r²/a²) has exactly this second moment); the peak pressure is the reported pressure's maximum, and, beside
 # it, the law's pressure at the quadrature points averaged near the axis against Hertz's same average. The
 # compliance μ = 1e-5 lets the body into the sphere by μ p ~ 1e-6, 1e-4 of the approach: rigid contact for
 # Hertz's formulas. Only the first level (t = 0) is solved: the elastic contact problem.
