@@ -379,14 +379,16 @@ def _points(pvs, args: argparse.Namespace, view, nodes, column: str, H: int):
     return disp, lut
 
 
-def _scalar_bar(pvs, view, disp, lut, field: str, ncomp: int, H: int) -> None:
+def _scalar_bar(pvs, view, disp, lut, field: str, ncomp: int, H: int, side: bool = False) -> None:
+    """The colour bar of ``disp``: horizontal below the picture, or (``side``) vertical on the right, for a second
+    bar beside the main one (the contact boundary's)."""
     bar = pvs.GetScalarBar(lut, view)
-    bar.Title = field
+    bar.Title = f"{field} (contact boundary)" if side else field
     bar.ComponentTitle = "(magnitude)" if ncomp > 1 else ""
-    bar.Orientation = "Horizontal"
+    bar.Orientation = "Vertical" if side else "Horizontal"
     bar.WindowLocation = "Any Location"
-    bar.Position = [0.25, 0.03]
-    bar.ScalarBarLength = 0.5
+    bar.Position = [0.9, 0.2] if side else [0.25, 0.03]
+    bar.ScalarBarLength = 0.55 if side else 0.5
     bar.ScalarBarThickness = max(12, H // 50)
     bar.TitleFontSize = bar.LabelFontSize = max(12, H // 50)
     bar.TitleColor = bar.LabelColor = [0.0, 0.0, 0.0]
@@ -432,23 +434,7 @@ def _contact_layer(pvs, args: argparse.Namespace, view, path: str, t: float, war
         lut.RescaleTransferFunction(*args.range)
     else:
         disp.RescaleTransferFunctionToDataRange(False, True)
-    if main_bar:
-        _scalar_bar(pvs, view, disp, lut, field, 1, H)
-    else:
-        bar = pvs.GetScalarBar(lut, view)
-        bar.Title = f"{field} (contact boundary)"
-        bar.ComponentTitle = ""
-        bar.Orientation = "Vertical"
-        bar.WindowLocation = "Any Location"
-        bar.Position = [0.9, 0.2]
-        bar.ScalarBarLength = 0.55
-        bar.ScalarBarThickness = max(12, H // 50)
-        bar.TitleFontSize = bar.LabelFontSize = max(12, H // 50)
-        bar.TitleColor = bar.LabelColor = [0.0, 0.0, 0.0]
-        bar.AutomaticLabelFormat = 0
-        bar.LabelFormat = bar.RangeLabelFormat = "%-#.3g"
-        bar.Visibility = 1
-        disp.SetScalarBarVisibility(view, True)
+    _scalar_bar(pvs, view, disp, lut, field, 1, H, side=not main_bar)
     return disp
 
 
