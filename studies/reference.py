@@ -23,7 +23,7 @@ from solver.mesh.transfer import gradient_matrices, interpolation_matrix, petsc_
 
 
 class PointwiseError:
-    """The paper's error of a run on any mesh against a reference on another (serial, 2-D).
+    """The paper's error of a run on any mesh against a reference on another (serial; triangles or tetrahedra).
 
     The integrals run over the judged run's own cells, with a degree-``q`` rule: eps(u_h) and
     zeta_h there are polynomials, and the reference's strain and damage are evaluated at the
@@ -41,16 +41,18 @@ class PointwiseError:
         from dolfinx import fem
 
         mesh = model.geo.mesh
-        X, w = basix.make_quadrature(basix.CellType.triangle, q)
-        n_cells = mesh.topology.index_map(2).size_local
+        dim = mesh.topology.dim
+        self.dim = dim
+        X, w = basix.make_quadrature(basix.CellType.triangle if dim == 2 else basix.CellType.tetrahedron, q)
+        n_cells = mesh.topology.index_map(dim).size_local
         self.cells = np.arange(n_cells, dtype=np.int32)
-        nodes = mesh.geometry.dofmap.array.reshape(-1, 3)[:n_cells]
-        x = mesh.geometry.x[:, :2][nodes]  # (cell, vertex, xy)
-        J = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]], axis=2)
+        nodes = mesh.geometry.dofmap.array.reshape(-1, dim + 1)[:n_cells]
+        x = mesh.geometry.x[:, :dim][nodes]  # (cell, vertex, coordinate)
+        J = np.stack([x[:, i] - x[:, 0] for i in range(1, dim + 1)], axis=2)
         pts = x[:, 0][:, None, :] + np.einsum("cij,qj->cqi", J, X)
         self.W = (w[None, :] * np.abs(np.linalg.det(J))[:, None]).ravel()
-        flat = pts.reshape(-1, 2)
-        self.Dx, self.Dy = gradient_matrices(V_ref, flat)
+        flat = pts.reshape(-1, dim)
+        self.D = gradient_matrices(V_ref, flat)
         self.eps = fem.Expression(ufl.sym(ufl.grad(model.u)), X)
         self.nq = len(w)
         self.model = model
@@ -61,10 +63,11 @@ class PointwiseError:
 
     def __call__(self, u_ref: np.ndarray, zeta_ref: np.ndarray | None) -> tuple[float, float]:
         """(||eps(u_ref - u)||, ||zeta_ref - zeta||) for the judged model's current fields."""
-        u = u_ref.reshape(-1, 2)
-        gx, gy = self.Dx @ u, self.Dy @ u  # (point, component): d u_i / dx, d u_i / dy
-        e_ref = np.stack([gx[:, 0], 0.5 * (gy[:, 0] + gx[:, 1]), 0.5 * (gy[:, 0] + gx[:, 1]), gy[:, 1]], axis=1)
-        e_h = self.eps.eval(self.cells).reshape(-1, 4)
+        dim = self.dim
+        u = u_ref.reshape(-1, dim)
+        g = np.stack([D @ u for D in self.D], axis=2)  # (point, component i, derivative j): d u_i / d x_j
+        e_ref = (0.5 * (g + np.transpose(g, (0, 2, 1)))).reshape(-1, dim * dim)
+        e_h = self.eps.eval(self.cells).reshape(-1, dim * dim)
         d = e_ref - e_h
         eu = float(np.sqrt(max(np.einsum("p,pi,pi->", self.W, d, d), 0.0)))
         ez = 0.0

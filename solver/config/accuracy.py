@@ -51,8 +51,6 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> AccuracyConfig:
         raise ctx.fail("accuracy.degrees", raw, "must be a non-empty list of degrees from 1, 2")
     degrees = tuple(sorted({integer(ctx, "accuracy.degrees", x) for x in raw}))
     need(ctx, "accuracy.degrees", raw, set(degrees) <= set(DEGREES), "allowed: a list of degrees from 1, 2")
-    if tol is not None and scene["dim"] == 3:
-        raise ctx.fail("accuracy.tolerance", tol, "only 2-D scenes for now (the adaptive refinement is 2-D)")
     return AccuracyConfig(tol, relative, share, theta, max_dofs, degrees)
 
 

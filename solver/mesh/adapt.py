@@ -1,13 +1,15 @@
-"""Local refinement of a scene's mesh with its named boundary parts kept (2-D).
+"""Local refinement of a scene's mesh with its named boundary parts kept (triangles and tetrahedra).
 
 ``dolfinx.mesh.refine(mesh, edges)`` (Plaza) refines the marked edges and what closure
 needs, in serial and in parallel, but gives the new mesh no facet tags, and
 ``transfer_facet_meshtag`` works in 0.5.2 only after uniform refinement without ghosts.
 So the parts are re-tagged by containment: every exterior facet of the new mesh lies inside
 exactly one exterior facet of the old one (refinement only splits facets), and takes that
-facet's tag. The old tagged facets are few (the boundary), so every rank gathers all of
-them; each rank then tags its own new facets. This works for the built-in rectangles and
-for gmsh meshes alike.
+facet's tag (in 3-D: the midpoint of a new boundary triangle lies in the plane of one old
+tagged triangle and inside it). The old tagged facets are few (the boundary), so every rank
+gathers all of them; each rank then tags its own new facets. This works for the built-in
+rectangles and boxes and for gmsh meshes alike (a curved gmsh boundary is made of flat
+facets; refinement puts its new nodes on them, not on the curve).
 """
 
 from __future__ import annotations
@@ -20,15 +22,36 @@ from dolfinx import mesh as dmesh
 from solver.mesh.geometry import Geometry, equispaced
 
 
-def _segments(geo: Geometry) -> tuple[np.ndarray, np.ndarray]:
-    """All ranks' tagged facets as segments (k, 2, 2) and their tags (k,)."""
+def _facets(geo: Geometry) -> tuple[np.ndarray, np.ndarray]:
+    """All ranks' tagged facets as simplices (k, dim, dim) (segments in 2-D, triangles in 3-D) and their tags (k,)."""
     mesh = geo.mesh
-    fdim = mesh.topology.dim - 1
+    dim = mesh.topology.dim
     facets = geo.facet_tags.indices
-    nodes = cpp.mesh.entities_to_geometry(mesh._mesh, fdim, facets, False)  # Debian's 0.5.2: _mesh is the C++ mesh
-    seg = mesh.geometry.x[nodes][:, :, :2] if len(facets) else np.zeros((0, 2, 2))
-    parts = geo.comm.allgather((seg, geo.facet_tags.values))
+    nodes = cpp.mesh.entities_to_geometry(mesh._mesh, dim - 1, facets, False)  # Debian's 0.5.2: _mesh is the C++ mesh
+    x = mesh.geometry.x[nodes][:, :, :dim] if len(facets) else np.zeros((0, dim, dim))
+    parts = geo.comm.allgather((x, geo.facet_tags.values))
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def _distances(points: np.ndarray, simplices: np.ndarray) -> np.ndarray:
+    """(point, simplex): the distance of each point to each segment (2-D) or triangle (3-D), exact where the
+    point's projection falls inside (all that containment needs), else an upper bound of it."""
+    a = simplices[:, 0]
+    d = points[:, None, :] - a[None]  # (point, simplex, dim)
+    if simplices.shape[1] == 2:
+        ab = simplices[:, 1] - a
+        s = np.clip(np.einsum("pkj,kj->pk", d, ab) / np.einsum("kj,kj->k", ab, ab), 0.0, 1.0)
+        return np.linalg.norm(d - s[:, :, None] * ab[None], axis=2)
+    e1, e2 = simplices[:, 1] - a, simplices[:, 2] - a
+    normal = np.cross(e1, e2)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    height = np.einsum("pkj,kj->pk", d, normal)
+    g11, g12, g22 = (np.einsum("kj,kj->k", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("pkj,kj->pk", d, e1), np.einsum("pkj,kj->pk", d, e2)
+    det = g11 * g22 - g12**2
+    b1, b2 = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det  # barycentric coordinates in the plane
+    outside = np.maximum(0.0, -np.minimum(np.minimum(b1, b2), 1.0 - b1 - b2)) * np.sqrt(np.maximum(g11, g22))
+    return np.abs(height) + outside
 
 
 def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
@@ -36,28 +59,27 @@ def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     boundary parts re-tagged by containment in the old tagged facets. Collective."""
     mesh = geo.mesh
     tdim = mesh.topology.dim
-    if tdim != 2:
-        raise NotImplementedError("adapt.refine: 2-D meshes only")
     mesh.topology.create_connectivity(tdim, 1)
     c2e = mesh.topology.connectivity(tdim, 1)
-    edges = np.unique(c2e.array.reshape(-1, 3)[np.asarray(cells, dtype=np.int32)]).astype(np.int32)
+    n_edges = 3 if tdim == 2 else 6
+    edges = np.unique(c2e.array.reshape(-1, n_edges)[np.asarray(cells, dtype=np.int32)]).astype(np.int32)
     new = equispaced(dmesh.refine(mesh, edges, redistribute=False))  # refine copies the parent's element as it is now
     fdim = tdim - 1
     new.topology.create_connectivity(fdim, tdim)
     exterior = cpp.mesh.exterior_facet_indices(new.topology)
-    mid = dmesh.compute_midpoints(new, fdim, exterior)[:, :2] if len(exterior) else np.zeros((0, 2))
-    seg, tag = _segments(geo)
+    mid = dmesh.compute_midpoints(new, fdim, exterior)[:, :tdim] if len(exterior) else np.zeros((0, tdim))
+    simplices, tag = _facets(geo)
     indices, values = np.empty(0, np.int32), np.empty(0, np.int32)
-    if len(exterior) and len(seg):
-        a, b = seg[:, 0], seg[:, 1]  # (k, 2)
-        ab = b - a
-        length2 = np.einsum("kj,kj->k", ab, ab)
-        s = np.einsum("fkj,kj->fk", mid[:, None, :] - a[None], ab) / length2  # (facet, segment)
-        closest = a[None] + np.clip(s, 0.0, 1.0)[:, :, None] * ab[None]
-        dist = np.linalg.norm(mid[:, None, :] - closest, axis=2)
-        best = np.argmin(dist, axis=1)
-        scale = np.sqrt(length2.max())
-        inside = dist[np.arange(len(mid)), best] < 1e-9 * scale
+    if len(exterior) and len(simplices):
+        scale = float(np.ptp(simplices.reshape(-1, tdim), axis=0).max())
+        best = np.empty(len(mid), dtype=np.int64)
+        dist = np.empty(len(mid))
+        chunk = max(1, 2_000_000 // len(simplices))  # (point, simplex) blocks of a few million entries
+        for i in range(0, len(mid), chunk):
+            d = _distances(mid[i:i + chunk], simplices)
+            best[i:i + chunk] = np.argmin(d, axis=1)
+            dist[i:i + chunk] = d[np.arange(len(d)), best[i:i + chunk]]
+        inside = dist < 1e-9 * scale
         indices, values = exterior[inside].astype(np.int32), tag[best[inside]].astype(np.int32)
     order = np.argsort(indices)
     ft = dmesh.meshtags(new, fdim, indices[order], values[order])
@@ -65,6 +87,7 @@ def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
 
 
 def refine_uniformly(geo: Geometry) -> Geometry:
-    """The mesh with every owned cell refined (4 children each), its boundary parts kept. Collective."""
+    """The mesh with every owned cell refined (4 children each in 2-D, 8 in 3-D), its boundary parts kept.
+    Collective."""
     mesh = geo.mesh
     return refine(geo, np.arange(mesh.topology.index_map(mesh.topology.dim).size_local))

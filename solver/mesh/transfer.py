@@ -2,7 +2,7 @@
 
 A run's fields are carried to other points (a finer or an adapted mesh's dofs, an error
 estimator's probes) by the run's basis tabulated at those points: exact where the meshes
-nest and the source degree is at most the target's. 2-D affine triangles, this process.
+nest and the source degree is at most the target's. Affine triangles and tetrahedra, this process.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from dolfinx import geometry
 
 
 def locate(mesh, points: np.ndarray):
-    """The cell holding each point (2-D affine triangles), the cell's Jacobian (columns: edges) and the point's
+    """The cell holding each point (affine triangles or tetrahedra), the cell's Jacobian (columns: edges) and the point's
     reference coordinates; raises ValueError if a point lies outside this process's cells."""
 
     tdim = mesh.topology.dim
@@ -41,9 +41,9 @@ def locate(mesh, points: np.ndarray):
             raise ValueError("a point lies outside the mesh")
         cells[missing] = near
     gdofs = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[cells]
-    X = mesh.geometry.x[gdofs][:, :, :2]  # (point, vertex, xy)
-    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
-    ref = np.linalg.solve(J, (pts[:, :2] - X[:, 0])[:, :, None])[:, :, 0]
+    X = mesh.geometry.x[gdofs][:, :, :tdim]  # (point, vertex, coordinate)
+    J = np.stack([X[:, i] - X[:, 0] for i in range(1, tdim + 1)], axis=2)
+    ref = np.linalg.solve(J, (pts[:, :tdim] - X[:, 0])[:, :, None])[:, :, 0]
     return cells, J, ref
 
 
@@ -53,7 +53,8 @@ def tabulated(V, points: np.ndarray, derivatives: int):
     number of columns)."""
 
     cells, J, ref = locate(V.mesh, points)
-    element = basix.create_element(basix.ElementFamily.P, basix.CellType.triangle, V.ufl_element().degree(),
+    cell = basix.CellType.triangle if V.mesh.topology.dim == 2 else basix.CellType.tetrahedron
+    element = basix.create_element(basix.ElementFamily.P, cell, V.ufl_element().degree(),
                                    basix.LagrangeVariant.gll_warped)
     tab = element.tabulate(derivatives, ref)[:, :, :, 0]
     ndofs = tab.shape[2]
@@ -64,11 +65,11 @@ def tabulated(V, points: np.ndarray, derivatives: int):
 
 
 def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
-    """Rows: points; columns: the nodes of V (a Lagrange space on affine triangles, this process; for a vector
+    """Rows: points; columns: the nodes of V (a Lagrange space on affine triangles or tetrahedra, this process; for a vector
     space the matrix acts on each component: P @ u.reshape(-1, bs)).
 
     Each point is located in a cell of V's mesh (bounding-box tree), mapped to the reference
-    triangle, and V's element basis is tabulated there.
+    cell, and V's element basis is tabulated there.
     """
     _, tab, rows, cols, size = tabulated(V, points, 0)
     P = sp.csr_matrix((tab[0].ravel(), (rows, cols)), shape=(len(points), size))
@@ -76,13 +77,14 @@ def interpolation_matrix(V, points: np.ndarray) -> sp.csr_matrix:
     return P
 
 
-def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """(Dx, Dy): rows: points; columns: the nodes of V (a Lagrange space on affine triangles); Dx @ u gives
-    du/dx at the points (componentwise for a vector space, as :func:`interpolation_matrix`)."""
+def gradient_matrices(V, points: np.ndarray) -> tuple[sp.csr_matrix, ...]:
+    """(Dx, Dy) in 2-D, (Dx, Dy, Dz) in 3-D: rows: points; columns: the nodes of V (a Lagrange space on affine
+    triangles or tetrahedra); Dx @ u gives du/dx at the points (componentwise for a vector space, as
+    :func:`interpolation_matrix`)."""
     J, tab, rows, cols, size = tabulated(V, points, 1)
     Jinv_T = np.transpose(np.linalg.inv(J), (0, 2, 1))  # grad_x = J^{-T} grad_X
-    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab[1:])  # (x/y, point, local dof)
-    return tuple(sp.csr_matrix((grads[i].ravel(), (rows, cols)), shape=(len(points), size)) for i in range(2))
+    grads = np.einsum("pij,jpd->ipd", Jinv_T, tab[1:])  # (x/y(/z), point, local dof)
+    return tuple(sp.csr_matrix((grads[i].ravel(), (rows, cols)), shape=(len(points), size)) for i in range(J.shape[1]))
 
 
 def petsc_to_scipy(A) -> sp.csr_matrix:

@@ -10,3 +10,17 @@ C_TIMES_2MU = {1: 4.0e-3 * 100.0 / 1.3, 2: 1.8e-3 * 100.0 / 1.3}
 ADAPTED_RATE = {1: 0.49, 2: 1.02}
 # a time step's cost per displacement dof, per degree, relative to P1
 COST_PER_DOF = {1: 1.0, 2: 1.13}
+
+# the same, measured on 3-D Example 1 (configs/example1_3d.toml) at t = 0 (docs/guide/accuracy.md, "3-D")
+C_TIMES_2MU_3D = dict(C_TIMES_2MU)
+ADAPTED_RATE_3D = {d: r * 2.0 / 3.0 for d, r in ADAPTED_RATE.items()}
+
+
+def c_times_2mu(dim: int) -> dict[int, float]:
+    """C_TIMES_2MU of the mesh's dimension (triangles: 2, tetrahedra: 3)."""
+    return C_TIMES_2MU if dim == 2 else C_TIMES_2MU_3D
+
+
+def adapted_rate(dim: int) -> dict[int, float]:
+    """ADAPTED_RATE of the mesh's dimension (triangles: 2, tetrahedra: 3)."""
+    return ADAPTED_RATE if dim == 2 else ADAPTED_RATE_3D

@@ -33,7 +33,7 @@ from solver.mesh.adapt import refine, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
 
-from .constants import ADAPTED_RATE, C_TIMES_2MU, COST_PER_DOF
+from .constants import COST_PER_DOF, adapted_rate, c_times_2mu
 from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
@@ -88,7 +88,7 @@ def prepare(scene: Config, comm: MPI.Comm, log: Log) -> Setup:
     base = with_changes(cfg, start, {"time": {"order": order}})
     geo0 = build(comm, base.mesh, cfg.boundaries, cfg.dim)
     two_mu = cfg.material.E / (1.0 + cfg.material.nu)
-    constants = {d: C_TIMES_2MU[d] / two_mu for d in acc.degrees}
+    constants = {d: c_times_2mu(geo0.dim)[d] / two_mu for d in acc.degrees}
     tol = acc.tolerance
     if acc.relative:
         tol = acc.tolerance * solve_level0(with_changes(base, degrees(max(acc.degrees))), comm, geo0).strain_norm
@@ -137,7 +137,7 @@ class Planner:
     def _needed_dofs(self, degree: int, growth: float, share: float) -> float:
         """The dofs the degree's first mesh predicts for ``share`` by its adapted rate (error ~ dofs^-rate)."""
         first = self.seqs[degree][0]
-        return first.dofs * max(first.estimate * growth / share, 1.0) ** (1.0 / ADAPTED_RATE[degree])
+        return first.dofs * max(first.estimate * growth / share, 1.0) ** (1.0 / adapted_rate(self.setup.geo0.dim)[degree])
 
     def _degree(self, probe: SpaceProbe, share: float) -> tuple[int, tuple]:
         """One solve of each degree on the start mesh; the one whose predicted cost per step (the dofs it needs,

@@ -33,15 +33,16 @@ def with_changes(cfg: Config, *changes: dict) -> Config:
 
 
 def start_mesh(cfg: Config, comm: MPI.Comm) -> dict:
-    """A coarse start for a built-in rectangle: about 4 cells across its shorter side (doubled until the boundary
-    parts' ends fall on nodes); a gmsh mesh starts as it is. Returns the scene's changes."""
-    if cfg.mesh.kind != "rectangle":
+    """A coarse start for a built-in rectangle or box: about 4 cells across its shortest side (doubled until the
+    boundary parts' ends fall on nodes); a gmsh mesh starts as it is. Returns the scene's changes."""
+    if cfg.mesh.kind not in ("rectangle", "box"):
         return {}
-    (x0, y0), (x1, y1) = cfg.mesh.corners
-    h = min(x1 - x0, y1 - y0) / 4
+    lo, hi = (list(c) for c in cfg.mesh.corners)
+    sides = [b - a for a, b in zip(lo, hi)]
+    h = min(sides) / 4
     for scale in (1, 2, 4, 8, 16):
-        nx, ny = max(1, round((x1 - x0) / h)) * scale, max(1, round((y1 - y0) / h)) * scale
-        start = {"mesh": {"nx": nx, "ny": ny}}
+        n = [max(1, round(side / h)) * scale for side in sides]
+        start = {"mesh": dict(zip(("nx", "ny", "nz"), n))}
         try:
             build(comm, with_changes(cfg, start).mesh, cfg.boundaries, cfg.dim)
             return start

@@ -3,8 +3,9 @@
 
 The runs share the step, so the time error cancels in their differences. With e ~ cells^-s, s is observed from
 two differences within [ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX[q]] (a rate of 1 in h up to the best rate of zeta's
-degree q in L2), and e = D / (ratio^s - 1); with one earlier mesh s = 1/2, with none the difference to the
-uniform refinement gives e = 2 D.
+degree q in L2; these are the 2-D exponents, cells ~ h^-2: in 3-D, cells ~ h^-3, the same rates in h are 2/3 of
+them), and e = D / (ratio^s - 1); with one earlier mesh s is the rate 1 in h (1/2 in 2-D, 1/3 in 3-D), with none
+the difference to the uniform refinement (h halved: 4 children per triangle, 8 per tetrahedron) gives e = 2 D.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ from solver.mesh.transfer import interpolation_matrix
 from .scene import step, with_changes
 from .solves import HALVINGS, PilotRun, pilot_run
 
-# zeta's error e ~ cells^-s on nested meshes: s at least 1/2 (a rate of 1 in h) and at most the degree's best rate
-# in L2 ((q + 1) in h: s = (q + 1) / 2)
+# zeta's error e ~ cells^-s on nested 2-D meshes (cells ~ h^-2): s at least 1/2 (a rate of 1 in h) and at most the
+# degree's best rate in L2 ((q + 1) in h: s = (q + 1) / 2); in dimension d the same rates in h are s * 2 / d
 ZETA_EXPONENT_MIN = 0.5
 ZETA_EXPONENT_MAX = {1: 1.0, 2: 1.5}
 
@@ -71,16 +72,23 @@ def zeta_difference(coarse: PilotRun, fine: PilotRun, comm: MPI.Comm) -> float:
     return largest
 
 
-def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float, zeta_degree: int = 1) -> float:
+def exponent_range(zeta_degree: int, dim: int = 2) -> tuple[float, float]:
+    """The exponents s of e ~ cells^-s that zeta's error may have on nested meshes of dimension ``dim``: a rate of 1
+    in h up to its degree's best rate in L2."""
+    return ZETA_EXPONENT_MIN * 2.0 / dim, ZETA_EXPONENT_MAX[zeta_degree] * 2.0 / dim
+
+
+def observed_exponent(cells: tuple[int, int, int], d_ab: float, d_bc: float, zeta_degree: int = 1,
+                      dim: int = 2) -> float:
     """The exponent s of e(N) = A N^-s (N cells) from the differences of three nested meshes a, b, c:
-    d_ab / d_bc = (N_a^-s - N_b^-s) / (N_b^-s - N_c^-s), solved for s within [ZETA_EXPONENT_MIN,
-    ZETA_EXPONENT_MAX[zeta_degree]] (a ratio outside what that range gives is clamped to its end)."""
+    d_ab / d_bc = (N_a^-s - N_b^-s) / (N_b^-s - N_c^-s), solved for s within :func:`exponent_range` of the degree
+    and dimension (a ratio outside what that range gives is clamped to its end)."""
     na, nb, nc = (float(n) for n in cells)
 
     def model(s: float) -> float:
         return (na**-s - nb**-s) / (nb**-s - nc**-s)
 
-    lo, hi = ZETA_EXPONENT_MIN, ZETA_EXPONENT_MAX[zeta_degree]
+    lo, hi = exponent_range(zeta_degree, dim)
     ratio = d_ab / d_bc if d_bc > 0 else math.inf
     if not ratio > model(lo):  # also NaN
         return lo
@@ -106,8 +114,8 @@ def zeta_space(cfg: Config, comm: MPI.Comm, geo: Geometry, earlier: Sequence[Geo
     (the coarsest first), with e(N) = A N^-s over the number of cells N:
     - two earlier meshes a, b: s observed from the two differences (:func:`observed_exponent`), and
       e = D_bc / ((N_c / N_b)^s - 1);
-    - one: s = 1/2 (rho = sqrt(N_b / N_c), e = D rho / (1 - rho));
-    - none: from ``geo``'s uniform refinement, e = 2 D (s = 1/2, N_c / N_b = 4).
+    - one: s = 1/2 in 2-D, 1/3 in 3-D (a rate of 1 in h: rho = (N_b / N_c)^s, e = D rho / (1 - rho));
+    - none: from ``geo``'s uniform refinement, e = 2 D (h halved, rate 1 in h).
     ``runs``: the runs already made. The bound is 0 without damage (nothing is run)."""
     if not cfg.damage.enabled:
         return ZetaSpace(0.0, None)
@@ -118,8 +126,9 @@ def zeta_space(cfg: Config, comm: MPI.Comm, geo: Geometry, earlier: Sequence[Geo
     if finer is not None:
         return ZetaSpace(2.0 * zeta_difference(made[0], made[1], comm), finer)
     d_bc = zeta_difference(made[-2], made[-1], comm)
-    s = 0.5
+    dim = geo.dim
+    s = exponent_range(cfg.discretization.zeta_degree, dim)[0]
     if len(made) == 3:
         s = observed_exponent(tuple(cells), zeta_difference(made[0], made[1], comm), d_bc,
-                              cfg.discretization.zeta_degree)
+                              cfg.discretization.zeta_degree, dim)
     return ZetaSpace(d_bc / ((cells[-1] / cells[-2]) ** s - 1.0), None)
