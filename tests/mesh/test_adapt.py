@@ -81,3 +81,57 @@ def test_adapted_meshes_beat_uniform_ones_at_t0(comm):
             geo = refine(m.geo, np.flatnonzero(dorfler(e2, 0.5, MPI.COMM_SELF)))
         assert m.geo.num_cells() == adapted_cells
         assert estimator_for(m).total() == pytest.approx(adapted_eta, rel=1e-9)
+
+
+def _boundary_facets_only(geo):
+    """Every tagged owned facet is on the boundary (one cell): an interior facet wrongly tagged would fail."""
+    fdim = geo.dim - 1
+    geo.mesh.topology.create_connectivity(fdim, geo.dim)
+    f2c = geo.mesh.topology.connectivity(fdim, geo.dim)
+    owned = geo.mesh.topology.index_map(fdim).size_local
+    return all(len(f2c.links(f)) == 1 for f in geo.facet_tags.indices if f < owned)
+
+
+@pytest.mark.parametrize("scene,changes", [("example1_3d.toml", ["mesh.nx=3", "mesh.ny=3", "mesh.nz=3"]),
+                                           ("column3d.toml", [])])
+def test_3d_refinement_keeps_every_parts_area(comm, scene, changes):
+    """Tetrahedra: a third of the cells refined (Plaza's closure adds more), then a uniform refinement (8 children
+    per cell); every part keeps its area and its facets stay on the boundary, on the box and on the gmsh column
+    (whose flat facets the new nodes stay on), serially and on 2 ranks."""
+    cfg = load(ROOT / "configs" / scene, changes)
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    names = [p.name for p in cfg.boundaries]
+    before = _lengths(geo, names)
+    n = geo.mesh.topology.index_map(3).size_local
+    some = refine(geo, np.arange(0, n, 3 if scene == "example1_3d.toml" else 40))
+    assert geo.num_cells() < some.num_cells() < 8 * geo.num_cells()
+    assert _lengths(some, names) == pytest.approx(before, rel=1e-12) and _boundary_facets_only(some)
+    if scene == "example1_3d.toml":  # the column's 8x is tens of thousands of cells
+        fine = refine_uniformly(some)
+        assert fine.num_cells() == 8 * some.num_cells()
+        assert _lengths(fine, names) == pytest.approx(before, rel=1e-12) and _boundary_facets_only(fine)
+
+
+def test_3d_adaptation_is_the_same_on_2_ranks_as_serially(comm):
+    """Example 1 in 3-D at t = 0, P1 on 3 x 3 x 3: three Dörfler steps; the same meshes (cells) and estimates on 2
+    ranks as on one (the global threshold marks the same cells, and Plaza refines the same edges)."""
+    cfg = load(ROOT / "configs" / "example1_3d.toml", ["mesh.nx=3", "mesh.ny=3", "mesh.nz=3", "time.k=1.0",
+                                                        "time.T=1.0",
+                                                        "discretization.u_degree=1"])
+
+    def loop(c):
+        geo, out = None, []
+        for _ in range(4):
+            model = build_model(cfg, c, geo)
+            Stepper(model).step(0)
+            est = estimator_for(model)
+            eta2 = est.cells()
+            out.append((model.geo.num_cells(), est.total(eta2)))
+            geo = refine(model.geo, np.flatnonzero(dorfler(eta2, 0.5, c)))
+        return out
+
+    mine = loop(comm)
+    assert mine[-1][0] > mine[0][0] and mine[-1][1] < mine[0][1]
+    serial = loop(MPI.COMM_SELF) if comm.size > 1 else mine
+    assert [c for c, _ in mine] == [c for c, _ in serial]
+    assert [e for _, e in mine] == pytest.approx([e for _, e in serial], rel=1e-9)

@@ -22,6 +22,12 @@ def test_a_rectangle_starts_with_four_cells_across_its_shorter_side(comm):
     assert start_mesh(load(SCENE), comm) == {"mesh": {"nx": 4, "ny": 4}}
 
 
+def test_a_box_starts_with_four_cells_across_its_shortest_side(comm):
+    assert start_mesh(load(ROOT / "configs/example1_3d.toml"), comm) == {"mesh": {"nx": 4, "ny": 4, "nz": 4}}
+    long = load(ROOT / "configs/example1_3d.toml", ["mesh.corners=[[0, 0, 0], [2, 1, 0.5]]"])
+    assert start_mesh(long, comm) == {"mesh": {"nx": 16, "ny": 8, "nz": 4}}
+
+
 def test_a_gmsh_mesh_starts_as_it_is(comm):
     assert start_mesh(load(ROOT / "configs/example2.toml"), comm) == {}
 

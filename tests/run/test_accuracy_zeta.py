@@ -13,6 +13,7 @@ from solver.run.accuracy.zeta import (
     ZETA_EXPONENT_MAX,
     ZETA_EXPONENT_MIN,
     ZetaRuns,
+    exponent_range,
     observed_exponent,
     zeta_difference,
     zeta_space,
@@ -130,3 +131,14 @@ def test_where_zetas_part_leaves_no_room_the_mesh_is_refined_uniformly(monkeypat
     i = uniform[0]
     assert p.adaptation[i].cells == 4 * p.adaptation[i - 1].cells and p.adaptation[i].geo is None
     assert p.geo.num_cells() == p.adaptation[-1].cells and p.estimate.total <= 3e-3
+
+
+def test_in_3d_the_exponents_are_the_same_rates_in_h():
+    """cells ~ h^-3 on tetrahedra: a rate of 1 to q + 1 in h is s = 1/3 to (q + 1)/3 over the cells."""
+    assert exponent_range(1, 3) == pytest.approx((1 / 3, 2 / 3)) and exponent_range(2, 3) == pytest.approx((1 / 3, 1.0))
+    cells = (400, 3200, 25600)
+    e = [n ** -0.8 for n in cells]  # a rate of 2.4 in h
+    assert observed_exponent(cells, e[0] - e[1], e[1] - e[2], 1, 3) == pytest.approx(2 / 3)  # clamped for P1
+    assert observed_exponent(cells, e[0] - e[1], e[1] - e[2], 2, 3) == pytest.approx(0.8, rel=1e-9)
+    slow = [n ** -0.2 for n in cells]  # slower than 1 in h: clamped to 1/3
+    assert observed_exponent(cells, slow[0] - slow[1], slow[1] - slow[2], 2, 3) == pytest.approx(1 / 3)
