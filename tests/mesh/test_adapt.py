@@ -135,3 +135,24 @@ def test_3d_adaptation_is_the_same_on_2_ranks_as_serially(comm):
     serial = loop(MPI.COMM_SELF) if comm.size > 1 else mine
     assert [c for c, _ in mine] == [c for c, _ in serial]
     assert [e for _, e in mine] == pytest.approx([e for _, e in serial], rel=1e-9)
+
+
+@pytest.mark.xfail(strict=True, reason="Plaza's subdivision of unstructured tetrahedra depends on the partition "
+                                       "in dolfinx 0.5.2 (docs/guide/accuracy.md, 3-D)")
+def test_3d_refinement_of_an_unstructured_mesh_is_the_same_on_2_ranks(comm):
+    """The gmsh column's cells below z = 0.3 refined once: 14,977 cells serially, 14,978 on 2 ranks (the same marked
+    cells; the box and the 2-D meshes give the same meshes on 2 ranks). Fails until refinement is made independent
+    of the partition."""
+    if comm.size == 1:
+        pytest.skip("compares 2 ranks with one")
+    cfg = load(ROOT / "configs" / "column3d.toml")
+
+    def refined(c):
+        geo = build(c, cfg.mesh, cfg.boundaries, cfg.dim)
+        n = geo.mesh.topology.index_map(3).size_local
+        from dolfinx import mesh as dmesh
+
+        mid = dmesh.compute_midpoints(geo.mesh, 3, np.arange(n, dtype=np.int32))
+        return refine(geo, np.flatnonzero(mid[:, 2] < 0.3)).num_cells()
+
+    assert refined(comm) == refined(MPI.COMM_SELF)
