@@ -26,13 +26,14 @@ from pathlib import Path
 import numpy as np
 import ufl
 from dolfinx import fem
-from dolfinx.fem import petsc as fpetsc
 
 from solver.config import MaterialConfig, OutputConfig
 from solver.errors import OutputError, UsageError
 from solver.io.contact_series import ContactSeries
 from solver.io.xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
-from solver.physics.material import lame, strain, von_mises_array
+from solver.laws.memory import pairs
+from solver.physics.material import lame, von_mises_array
+from solver.physics.memory_source import StrainMap
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
          "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
@@ -45,13 +46,16 @@ PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
 class CellStresses:
     """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
 
-    For P1 displacements eps(u) is constant on each cell: its independent components are one
-    sparse product B u with B assembled once (rows scaled by 1/|K|; 12 entries per triangle),
-    and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
-    of the quadrature rule that integrates it everywhere else; on affine cells its L2
-    projection onto constants with that rule is the weighted mean of its point values. Rows
-    are in the local order of the owned cells (that of :func:`solver.io.xdmf.dolfinx_layout`).
-    In plane strain, sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
+    eps(u) is linear in u: its independent components at points of each cell come from a table of the scalar
+    basis gradients (:class:`solver.physics.memory_source.StrainMap`, 12 doubles per P1 tetrahedron, where the
+    assembled matrix of cell averages held 72 entries of 12 bytes). With memory the history's own source gives
+    them at its rule's points (the strain of u_n it keeps for the next commit: no product and no table of the
+    writer's own); without, a table at the cells' centroids. The cell average is the rule's weighted mean of the
+    point values, exact for a P1 or P2 u on affine cells (eps is then constant or linear in a cell), and
+    A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the same points: on affine cells
+    its L2 projection onto constants with that rule is the weighted mean of its point values. Rows are in the local
+    order of the owned cells (that of :func:`solver.io.xdmf.dolfinx_layout`). In plane strain,
+    sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
     """
 
     def __init__(self, model, material: MaterialConfig) -> None:
@@ -61,45 +65,43 @@ class CellStresses:
         self.lame_lambda, self.lame_mu = lame(material.E, material.nu, material.model)
         self.plane_strain = material.model == "plane_strain" and d == 2
         self._trace: np.ndarray | None = None
-        self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
-        E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
-        eps = strain(ufl.TrialFunction(model.u.function_space))
-        components = ufl.as_vector([eps[i, j] for i, j in self.pairs])
-        self.strain_components = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
-        self.strain_components.assemble()
-        S0 = fem.FunctionSpace(mesh, ("DG", 0))
-        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
-        scale = self.strain_components.createVecLeft()
-        n_dofs = E0.dofmap.index_map.size_local
-        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], len(self.pairs))
-        self.strain_components.diagonalScale(L=scale)
-        self.out = self.strain_components.createVecLeft()
+        self.pairs = pairs(d)  # xx, yy[, zz], then xy[, yz, xz]: the sources' order
         imap = mesh.topology.index_map(mesh.topology.dim)
         n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
-        self.cells = RowMap(E0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], len(self.pairs))  # one dof per cell
         if self.history is not None:
             rule = model.rule
             npts = len(rule.weights)
             self.npts = npts
-            self.points = RowMap(self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], d * d)
             self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
+            dofmap = self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)
+            self.points = RowMap(dofmap[:n_cells], d * d)
+            self._strain_points = dofmap[:n_cells]  # (owned cell, point) -> the source's point
+            self._strain = self.history.H.strain
             if self.plane_strain:  # M_33 is a scalar at the same points
                 self.points_zz = RowMap(self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], 1)
+        else:
+            E = _centroid_strains(model.u, n_cells)
+            self._strain_points = np.arange(n_cells)[:, None]
+            self._strain = lambda: (E @ self.u.x.array).reshape(len(self.pairs), -1)
 
     def elastic(self) -> np.ndarray:
         """A eps(u) per owned cell, rows of d*d (row-major)."""
-        self.strain_components.mult(self.u.vector, self.out)
-        e = self.cells.take(self.out.array_r)
+        eps = self._strain()  # (component, point); the source's kept array: read only
+        points = self._strain_points
+        if points.shape[1] == 1:
+            e = eps[:, points[:, 0]]  # (component, cell)
+        else:
+            e = (eps[:, points] * self.q_weights[:, :, 0]).sum(axis=2)
         d = self.d
-        s = np.empty((len(e), d, d))
-        trace = e[:, :d].sum(axis=1)
+        s = np.empty((e.shape[1], d, d))
+        trace = e[:d].sum(axis=0)
         self._trace = trace
         for k, (i, j) in enumerate(self.pairs):
             if i == j:
-                s[:, i, i] = 2.0 * self.lame_mu * e[:, k] + self.lame_lambda * trace
+                s[:, i, i] = 2.0 * self.lame_mu * e[k] + self.lame_lambda * trace
             else:
-                s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[:, k]
-        return s.reshape(len(e), d * d)
+                s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[k]
+        return s.reshape(len(s), d * d)
 
     def total(self, elastic: np.ndarray) -> np.ndarray:
         """sigma = A eps(u) + (cell average of M), given A eps(u)."""
@@ -236,6 +238,24 @@ class Outputs:
                 failure = failure or exc
         if failure is not None and not quiet:
             raise OutputError(str(failure), failure.t) from None
+
+
+def _centroid_strains(u: fem.Function, n_cells: int) -> StrainMap:
+    """eps(u)'s independent components at the centroids of the first ``n_cells`` local cells (their averages for a
+    P1 or P2 u on affine cells), as a table of the scalar basis gradients there."""
+    mesh = u.function_space.mesh
+    d = mesh.geometry.dim
+    V = u.function_space
+    S = fem.FunctionSpace(mesh, V.ufl_element().sub_elements()[0])
+    ndofs = S.dofmap.dof_layout.num_dofs
+    cells = np.arange(n_cells, dtype=np.int32)
+    centroid = np.full((1, d), 1.0 / (d + 1))
+    # a scalar trial function: a vector one in an Expression corrupts memory in dolfinx 0.5.2
+    grad = fem.Expression(ufl.grad(ufl.TrialFunction(S)), centroid).eval(cells).reshape(n_cells, 1, d, ndofs)
+    nodes = V.dofmap.list.array.reshape(-1, ndofs)[:n_cells]
+    bs = V.dofmap.index_map_bs
+    size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+    return StrainMap(grad, nodes, bs, cells[:, None], n_cells, size_v, pairs(d))
 
 
 def _vertex_values(f: fem.Function):
