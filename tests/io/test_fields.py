@@ -107,3 +107,29 @@ def test_cell_stresses_in_3d_with_and_without_memory(comm, u_degree, memory):
     if memory:
         want = projection(sig_el + model.history.M, mesh, model.rule.dx)
         assert np.allclose(cs.total(got_el), want, rtol=0, atol=1e-13 * np.abs(want).max())
+
+
+def test_cell_fields_in_blocks_equal_the_whole(comm, shared_tmp, monkeypatch):
+    """Outputs computes the cell fields block by block (only the written arrays whole): blocks of 7 cells give the
+    stresses and von Mises values of CellStresses over all cells at once."""
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05", "material.model='plane_strain'",
+                                                "solver.quadrature_degree=2"])
+    cfg = cfg.replace({"output": {"fields": ["stress", "elastic_stress", "von_mises", "von_mises_elastic",
+                                             "stress_zz"]}})
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(3):
+        stepper.step(n)
+    monkeypatch.setattr(Outputs, "BLOCK", 7)
+    out = Outputs(model, cfg.material, cfg.output, shared_tmp)
+    got = out.cell_fields()
+    cs = CellStresses(model, cfg.material)
+    elastic = cs.elastic()
+    total = cs.total(elastic)
+    zz, zz_el = cs.out_of_plane()
+    assert np.array_equal(got["elastic_stress"], elastic) and np.array_equal(got["stress"], total)
+    assert np.array_equal(got["stress_zz"], zz) and np.array_equal(got["elastic_stress_zz"], zz_el)
+    assert np.array_equal(got["von_mises"], von_mises_array(total, 2, zz))
+    assert np.array_equal(got["von_mises_elastic"], von_mises_array(elastic, 2, zz_el))
+    assert len(elastic) > 7 and np.abs(total - elastic).max() > 0
+    out.close()
