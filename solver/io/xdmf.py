@@ -63,6 +63,7 @@ This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import queue
 import re
@@ -136,9 +137,9 @@ class Layout:
     """
 
     comm: object
-    points: np.ndarray  # (owned nodes, gdim)
+    points: np.ndarray | None  # (owned nodes, gdim); None in a series' copy once it wrote the mesh
     node_keys: np.ndarray  # (owned nodes,)
-    cells: np.ndarray  # (owned cells, nodes per cell), node keys
+    cells: np.ndarray | None  # (owned cells, nodes per cell), node keys; None as points
     cell_keys: np.ndarray  # (owned cells,)
     cell_type: str  # XDMF TopologyType
     counts: dict[str, int] = field(default_factory=dict)  # filled by XDMFSeries: global rows per center
@@ -399,6 +400,9 @@ class XDMFSeries:
         self._setup_gather()
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
+        # the mesh is in its file now: neither the whole gathered mesh (rank 0) nor this rank's part is kept
+        self.points = self.cells = None
+        self.layout = dataclasses.replace(layout, points=None, cells=None)
 
     # ------------------------------------------------------------------ set-up
 
