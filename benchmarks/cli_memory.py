@@ -78,7 +78,7 @@ def spawn(cmd: list[str], cwd: Path) -> dict:
     peak_at = max(samples, key=lambda s: s[1]) if samples else (float("nan"), float("nan"))
     return {"peak_mib": usage.ru_maxrss / 1024.0, "wall_s": time.perf_counter() - t0, "stdout": stdout,
             "sampled_peak_mib": peak_at[1], "sampled_peak_at_s": peak_at[0],
-            "samples": [(round(t, 3), round(r, 1)) for t, r in samples[::5]]}
+            "samples": [(round(t, 2), round(r, 1)) for t, r in samples[:: max(1, len(samples) // 300)]]}
 
 
 def plain(n: int) -> dict:
