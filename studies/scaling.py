@@ -2,7 +2,9 @@
 
 ``python -m studies bench --scaling`` runs configs/example1_3d.toml on the box n x n x n (3 (n+1)^3 displacement
 dofs) for each size, linear solver and number of ranks, each case in its own process (``mpirun -n R`` for R > 1),
-nothing written: level 0 and 10 steps of k = 0.02. Per case: set-up (mesh, forms, operators), level 0 (the
+nothing written: level 0 and 10 steps of k = 0.02; then the same case again as a user runs it, ``python -m solver
+run`` with the scene's outputs and a checkpoint (:func:`spawn_cli`: its peak memory and step; ``--no-cli`` leaves it
+out). Per case: set-up (mesh, forms, operators), level 0 (the
 first factorizations or preconditioner set-ups), the mean step split into damage, memory, displacement and
 diagnostics, Newton and Krylov iterations, factorizations or preconditioner set-ups, peak memory (max and sum over
 ranks) and the final contact force. A case whose predicted time or memory exceeds the budget (from the largest
@@ -121,6 +123,50 @@ def spawn(n: int, solver: str, nproc: int, steps: int, timeout: float | None) ->
     return case
 
 
+def spawn_cli(n: int, solver: str, nproc: int, steps: int, timeout: float | None) -> dict:
+    """The same case as a user runs it: ``python -m solver run`` (under mpirun for nproc > 1) with the scene's
+    outputs (solution.xdmf, contact.xdmf, the CSVs) and a checkpoint at level 2, into a temporary directory.
+    Its peak is the largest resident set of the launched process and its descendants (wait4's ru_maxrss: the
+    largest rank under mpirun); its step the mean wall time of the steps after level 0 in timeseries.csv
+    (the writing included)."""
+    import csv
+    import shutil
+    import tempfile
+
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", OMP_NUM_THREADS="1")
+    tmp = Path(tempfile.mkdtemp(prefix="scaling_cli_"))
+    sets = [f"mesh.nx={n}", f"mesh.ny={n}", f"mesh.nz={n}", f"time.k={K}", f"time.T={K * steps}",
+            f"solver.linear='{solver}'", "output.checkpoint_every=2"]
+    cmd = [sys.executable, "-m", "solver", "run", str(SCENE), "--output", str(tmp / "run"), "--no-progress",
+           *(a for x in sets for a in ("--set", x))]
+    if nproc > 1:
+        cmd = ["mpirun", "-n", str(nproc), "--oversubscribe", *cmd]
+    try:
+        with tempfile.TemporaryFile() as err:
+            proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=err)
+            t0 = time.perf_counter()
+            while True:  # wait4 for the child's own peak; polled, so that the timeout holds
+                pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+                if pid:
+                    break
+                if timeout is not None and time.perf_counter() - t0 > timeout:
+                    proc.kill()
+                    os.wait4(proc.pid, 0)
+                    return {"cli_status": f"timed out after {timeout:.0f} s"}
+                time.sleep(0.2)
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            if proc.returncode != 0:
+                err.seek(0)
+                return {"cli_status": f"exit code {proc.returncode}: {err.read().decode()[-300:]}"}
+        with open(tmp / "run" / "timeseries.csv") as f:
+            rows = list(csv.DictReader(f))[1:]
+        return {"cli_status": "ok", "cli_peak_mib_max": usage.ru_maxrss / 1024.0,
+                "cli_step_s": float(np.mean([float(r["wall_time"]) for r in rows])),
+                "cli_output_s": float(np.mean([float(r["time_output"]) for r in rows]))}
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def anchor_key(solver: str, nproc: int, n: int) -> str:
     return f"plain-{solver}/np{nproc}/n{n}"
 
@@ -145,6 +191,8 @@ def anchor_ratios(case: dict, plain: dict) -> dict:
     """A case of the solver against the plain solve of the same size and ranks: time per step over one plain
     solve (iterative) or level 0 over the plain factorization (direct), Krylov iterations, peak memory."""
     out = {"peak": case["peak_mib_max"] / plain["peak_mib_max"],
+           "cli_peak": case["cli_peak_mib_max"] / plain["peak_mib_max"] if case.get("cli_peak_mib_max") else None,
+           "cli_step": case["cli_step_s"] / plain["solve_s"] if case.get("cli_step_s") else None,
            "bytes_per_dof": case["peak_mib_sum"] * 2 ** 20 / case["dofs"],
            "plain_bytes_per_dof": plain["peak_mib_sum"] * 2 ** 20 / plain["dofs"]}
     if case["solver"] == "iterative":
@@ -276,7 +324,8 @@ def table(scaling: dict) -> str:
     cases = scaling.get("cases", {})
     lines = [f"# Scaling: 3-D Example 1 (configs/example1_3d.toml, n x n x n box, k = {K})", "",
              f"Machine: {scaling.get('machine', '?')} ({scaling.get('cores', '?')} cores), {scaling.get('date', '?')}. "
-             "Each case in its own process, nothing written. Step = mean over the steps after level 0 (one cycle "
+             "Each case in its own process, nothing written (the CLI's run with its outputs: the table against the plain "
+             "solve below). Step = mean over the steps after level 0 (one cycle "
              "of the iterative path's initial guess, see the steps column); "
              "level 0 holds the first factorizations or preconditioner set-ups. Peak = the largest resident set "
              "of a rank (max) and their sum.", "", blas.report_line(scaling.get("blas")) + " Per case: the BLAS column.", "",
@@ -319,10 +368,13 @@ def anchor_table(scaling: dict) -> list[str]:
            "ordering, the solver's). Measured in the same run as the cases, each in its own process. "
            "Ratios: the solver's step over one plain solve, its level 0 over the plain set-up (factorization), and "
            "per factorization (level 0 factors once per contact active set it meets: twice here), "
-           "Krylov iterations per solve over the plain solve's, peak memory (max rank) over the plain solve's.", "",
+           "Krylov iterations per solve over the plain solve's, peak memory (max rank) over the plain solve's. "
+           "CLI: the same case run as `python -m solver run` with the scene's outputs and a checkpoint "
+           "(:func:`spawn_cli`): its peak and its step (writing included) over the plain solve's.", "",
            "| n | dofs | ranks | plain solver | plain set-up (s) | plain solve (s) | plain its | plain peak MiB "
            "| plain B/dof | solver | step / plain solve | level 0 / plain set-up | level 0 per factorization "
-           "/ plain factorization | Krylov its ratio | peak ratio | solver B/dof |", "|" + "---|" * 16]
+           "/ plain factorization | Krylov its ratio | peak ratio | solver B/dof | CLI peak ratio "
+           "| CLI step / plain solve |", "|" + "---|" * 18]
     for a in sorted(anchors.values(), key=lambda a: (a["n"], a["solver"], a["nproc"])):
         if a.get("status") != "ok":
             out.append(f"| {a['n']} | {a['dofs']:,} | {a['nproc']} | {a['solver']} | {a.get('status')}: "
@@ -333,14 +385,16 @@ def anchor_table(scaling: dict) -> list[str]:
         mine = "iterative" if a["solver"] == "gamg" else "mumps"
         c = cases.get(key(mine, a["nproc"], a["n"]))
         if not c or c.get("status") != "ok":
-            out.append(head + f"| {mine}: not measured |" + " |" * 6)
+            out.append(head + f"| {mine}: not measured |" + " |" * 8)
             continue
         r = anchor_ratios(c, a)
         krylov = f"{r['krylov']:.2f}" if r.get("krylov") is not None else "-"
         level0 = f"{r['level0']:.2f}" if "level0" in r else "-"
         per = f"{r['per_factorization']:.2f}" if r.get("per_factorization") else "-"
+        cli_peak = f"{r['cli_peak']:.2f}" if r.get("cli_peak") else c.get("cli_status", "not measured")
+        cli_step = f"{r['cli_step']:.2f}" if r.get("cli_step") else "-"
         out.append(head + f"| {mine} | {r['step']:.2f} | {level0} | {per} | {krylov} | {r['peak']:.2f} "
-                   f"| {r['bytes_per_dof']:,.0f} |")
+                   f"| {r['bytes_per_dof']:,.0f} | {cli_peak} | {cli_step} |")
     return out
 
 
@@ -532,6 +586,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--output", default=str(RESULTS))
     p.add_argument("--no-readme", action="store_true", help="do not rewrite the README's generated block")
     p.add_argument("--report-only", action="store_true", help="run nothing: rewrite the fits and reports from bench.json")
+    p.add_argument("--no-cli", action="store_true",
+                   help="do not run each case again as `python -m solver run` with its outputs (spawn_cli)")
     p.add_argument("--no-anchor", action="store_true", help="do not run the plain-elasticity anchor (studies/anchor.py)")
     p.add_argument(blas.ALLOW_FLAG, action="store_true", help="measure even on netlib's reference BLAS (named in the report)")
     a = p.parse_args(argv)
@@ -581,6 +637,8 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     cases[k] = spawn(n, solver, nproc, steps, timeout)
                     c = cases[k]
+                    if c["status"] == "ok" and not a.no_cli:
+                        c.update(spawn_cli(n, solver, nproc, steps, timeout))
                     print(f"{k}: " + (f"{c['status']}: {c.get('reason')}" if c["status"] != "ok" else
                                       f"{c['dofs']:,} dofs, set-up {c['setup_s']:.1f} s, level 0 {c['level0_s']:.1f} s, "
                                       f"{1e3 * c['step_s']:,.0f} ms/step, peak {c['peak_mib_max']:,.0f} MiB"), flush=True)

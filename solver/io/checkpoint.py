@@ -106,34 +106,57 @@ def _fields(model, clock=None) -> dict[str, _Field]:
 
 def write(directory: Path, model, step: int, t: float, part: int, clock=None) -> None:
     """Write the checkpoint of level ``step`` (collective; rank 0 writes); ``clock``: an adaptive run's
-    :class:`solver.run.adaptive.StepController`, whose step history and past levels it keeps too."""
+    :class:`solver.run.adaptive.StepController`, whose step history and past levels it keeps too.
+
+    Streamed: one field at a time is gathered to rank 0, sorted and written, so that the write holds at most one
+    field's gathered copy beside the state (one process gathers nothing: its own arrays are written)."""
     comm = model.comm
     fields = _fields(model, clock)
-    gathered = {name: comm.gather((f.coords[: f.owned], f.rows[: f.owned]), root=0) for name, f in fields.items()}
+    path = Path(directory) / NAME
+    tmp = path.with_name(NAME + ".tmp")
+    h5, error = None, None
+    if comm.rank == 0:
+        try:
+            h5 = h5py.File(tmp, "w")
+            h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
+                             **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
+                             **({f"damage_{k}": v for k, v in model.damage.scalars().items()} if model.damage else {}),
+                             **({f"clock_{k}": v for k, v in clock.scalars().items()} if clock else {})})
+        except Exception as exc:  # noqa: BLE001  (reported after the collective gathers below)
+            error = exc
+    for name, f in fields.items():
+        mine = (f.coords[: f.owned], f.rows[: f.owned])
+        parts = comm.gather(mine, root=0) if comm.size > 1 else [mine]
+        if comm.rank != 0 or error is not None:
+            continue
+        try:
+            coords = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+            values = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
+            del parts
+            order = _order(coords)
+            h5.create_dataset(f"{name}/coords", data=coords[order])
+            del coords
+            h5.create_dataset(f"{name}/values", data=values[order])
+            del values
+        except Exception as exc:  # noqa: BLE001
+            error = exc
 
     def save() -> None:
-
-        path = Path(directory) / NAME
-        tmp = path.with_name(NAME + ".tmp")
         try:
-            with h5py.File(tmp, "w") as h5:
-                h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
-                                 **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
-                                 **({f"damage_{k}": v for k, v in model.damage.scalars().items()}
-                                    if model.damage else {}),
-                                 **({f"clock_{k}": v for k, v in clock.scalars().items()} if clock else {})})
-                for name, parts in gathered.items():
-                    coords = np.concatenate([p[0] for p in parts])
-                    values = np.concatenate([p[1] for p in parts])
-                    order = _order(coords)
-                    h5.create_dataset(f"{name}/coords", data=coords[order])
-                    h5.create_dataset(f"{name}/values", data=values[order])
+            if error is not None:
+                raise error
+            h5.close()
             with open(tmp, "rb") as fh:
                 os.fsync(fh.fileno())
         except Exception as exc:  # a full disk: the previous checkpoint stays as it was
+            if h5 is not None and h5.id.valid:
+                try:
+                    h5.close()
+                except Exception:  # noqa: BLE001
+                    pass
             tmp.unlink(missing_ok=True)
             if isinstance(exc, OSError):
-                raise
+                raise exc from None
             raise OSError(f"{NAME}: {exc}") from exc
         os.replace(tmp, path)
 

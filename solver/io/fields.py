@@ -26,13 +26,14 @@ from pathlib import Path
 import numpy as np
 import ufl
 from dolfinx import fem
-from dolfinx.fem import petsc as fpetsc
 
 from solver.config import MaterialConfig, OutputConfig
 from solver.errors import OutputError, UsageError
 from solver.io.contact_series import ContactSeries
-from solver.io.xdmf import DolfinxRows, FieldSpec, RowMap, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
-from solver.physics.material import lame, strain, von_mises_array
+from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
+from solver.laws.memory import pairs
+from solver.physics.material import lame, von_mises_array
+from solver.physics.memory_source import StrainMap
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
          "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
@@ -45,13 +46,16 @@ PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
 class CellStresses:
     """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
 
-    For P1 displacements eps(u) is constant on each cell: its independent components are one
-    sparse product B u with B assembled once (rows scaled by 1/|K|; 12 entries per triangle),
-    and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
-    of the quadrature rule that integrates it everywhere else; on affine cells its L2
-    projection onto constants with that rule is the weighted mean of its point values. Rows
-    are in the local order of the owned cells (that of :func:`solver.io.xdmf.dolfinx_layout`).
-    In plane strain, sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
+    eps(u) is linear in u: its independent components at points of each cell come from a table of the scalar
+    basis gradients (:class:`solver.physics.memory_source.StrainMap`, 12 doubles per P1 tetrahedron, where the
+    assembled matrix of cell averages held 72 entries of 12 bytes). With memory the history's own source gives
+    them at its rule's points (the strain of u_n it keeps for the next commit: no product and no table of the
+    writer's own); without, a table at the cells' centroids. The cell average is the rule's weighted mean of the
+    point values, exact for a P1 or P2 u on affine cells (eps is then constant or linear in a cell), and
+    A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the same points: on affine cells
+    its L2 projection onto constants with that rule is the weighted mean of its point values. Rows are in the local
+    order of the owned cells (that of :func:`solver.io.xdmf.dolfinx_layout`). In plane strain,
+    sigma_33 = lambda tr eps(u) + M_33 per cell as well (:meth:`out_of_plane`).
     """
 
     def __init__(self, model, material: MaterialConfig) -> None:
@@ -61,68 +65,80 @@ class CellStresses:
         self.lame_lambda, self.lame_mu = lame(material.E, material.nu, material.model)
         self.plane_strain = material.model == "plane_strain" and d == 2
         self._trace: np.ndarray | None = None
-        self.pairs = [(i, i) for i in range(d)] + ([(0, 1)] if d == 2 else [(0, 1), (1, 2), (0, 2)])
-        E0 = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=len(self.pairs))
-        eps = strain(ufl.TrialFunction(model.u.function_space))
-        components = ufl.as_vector([eps[i, j] for i, j in self.pairs])
-        self.strain_components = fpetsc.assemble_matrix(fem.form(ufl.inner(components, ufl.TestFunction(E0)) * ufl.dx))
-        self.strain_components.assemble()
-        S0 = fem.FunctionSpace(mesh, ("DG", 0))
-        vol = fpetsc.assemble_vector(fem.form(ufl.TestFunction(S0) * ufl.dx))  # local cell volumes, no sharing
-        scale = self.strain_components.createVecLeft()
-        n_dofs = E0.dofmap.index_map.size_local
-        scale.array[:] = np.repeat(1.0 / vol.array_r[:n_dofs], len(self.pairs))
-        self.strain_components.diagonalScale(L=scale)
-        self.out = self.strain_components.createVecLeft()
+        self.pairs = pairs(d)  # xx, yy[, zz], then xy[, yz, xz]: the sources' order
         imap = mesh.topology.index_map(mesh.topology.dim)
         n_cells, n_all = imap.size_local, imap.size_local + imap.num_ghosts
-        self.cells = RowMap(E0.dofmap.list.array.reshape(n_all, -1)[:n_cells, 0], len(self.pairs))  # one dof per cell
         if self.history is not None:
             rule = model.rule
             npts = len(rule.weights)
             self.npts = npts
-            self.points = RowMap(self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], d * d)
             self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
+            dofmap = self.history.M.function_space.dofmap.list.array.reshape(n_all, npts)
+            self._strain_points = dofmap[:n_cells]  # (owned cell, point) -> the rule's point (M's and the source's)
+            self._strain = self.history.H.strain
             if self.plane_strain:  # M_33 is a scalar at the same points
-                self.points_zz = RowMap(self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], 1)
+                self._points_zz = self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells]
+        else:
+            E = _centroid_strains(model.u, n_cells)
+            self._strain_points = np.arange(n_cells)[:, None]
+            self._strain = lambda: (E @ self.u.x.array).reshape(len(self.pairs), -1)
+        self.n_cells = n_cells
+        self._eps = self._memory = self._memory_zz = None
 
-    def elastic(self) -> np.ndarray:
-        """A eps(u) per owned cell, rows of d*d (row-major)."""
-        self.strain_components.mult(self.u.vector, self.out)
-        e = self.cells.take(self.out.array_r)
+    def prepare(self) -> None:
+        """Read the level: eps(u) at the points (the source's kept array, read only) and the memory tensors.
+        :meth:`elastic` over all cells calls it; blocks of cells (``rows``) need it first."""
+        self._eps = self._strain()
+        if self.history is None:
+            return
+        weight = self.history.current_weight
+        w = float(weight.value) if weight is not None else 0.0
+        # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
+        self._memory = self.history.M.x.array if w == 0.0 else self.history.M.x.array + w * self.history.H()
+        if self.plane_strain:
+            zz = self.history.out_of_plane
+            self._memory_zz = zz.M.x.array if w == 0.0 else zz.M.x.array + w * zz.H()
+
+    def elastic(self, rows: slice | None = None) -> np.ndarray:
+        """A eps(u) per owned cell (``rows``: a block of them, after :meth:`prepare`), rows of d*d (row-major)."""
+        if rows is None:
+            self.prepare()
+            rows = slice(None)
+        eps = self._eps
+        points = self._strain_points[rows]
+        if points.shape[1] == 1:
+            e = eps[:, points[:, 0]]  # (component, cell)
+        else:
+            e = (eps[:, points] * self.q_weights[:, :, 0]).sum(axis=2)
         d = self.d
-        s = np.empty((len(e), d, d))
-        trace = e[:, :d].sum(axis=1)
+        s = np.empty((e.shape[1], d, d))
+        trace = e[:d].sum(axis=0)
         self._trace = trace
         for k, (i, j) in enumerate(self.pairs):
             if i == j:
-                s[:, i, i] = 2.0 * self.lame_mu * e[:, k] + self.lame_lambda * trace
+                s[:, i, i] = 2.0 * self.lame_mu * e[k] + self.lame_lambda * trace
             else:
-                s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[:, k]
-        return s.reshape(len(e), d * d)
+                s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[k]
+        return s.reshape(len(s), d * d)
 
-    def total(self, elastic: np.ndarray) -> np.ndarray:
-        """sigma = A eps(u) + (cell average of M), given A eps(u)."""
+    def total(self, elastic: np.ndarray, rows: slice | None = None) -> np.ndarray:
+        """sigma = A eps(u) + (cell average of M), given A eps(u) of the same cells."""
         if self.history is None:
             return elastic
-        return elastic + self._cell_average(self.history.M.x.array, self.history.H, self.points, self.d * self.d)
+        return elastic + self._cell_average(self._memory, self._strain_points, self.d * self.d, rows)
 
-    def out_of_plane(self) -> tuple[np.ndarray, np.ndarray]:
-        """(sigma_33, (A eps)_33) per owned cell in plane strain, after :meth:`elastic`: eps_33 = 0, so
-        (A eps)_33 = lambda tr eps(u), and sigma_33 adds the cell average of the memory's M_33."""
+    def out_of_plane(self, rows: slice | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(sigma_33, (A eps)_33) per owned cell in plane strain, after :meth:`elastic` of the same cells: eps_33 = 0,
+        so (A eps)_33 = lambda tr eps(u), and sigma_33 adds the cell average of the memory's M_33."""
         elastic = self.lame_lambda * self._trace
         if self.history is None:
             return elastic, elastic
-        zz = self.history.out_of_plane
-        return elastic + self._cell_average(zz.M.x.array, zz.H, self.points_zz, 1)[:, 0], elastic
+        return elastic + self._cell_average(self._memory_zz, self._points_zz, 1, rows)[:, 0], elastic
 
-    def _cell_average(self, memory: np.ndarray, source, points: RowMap, width: int) -> np.ndarray:
+    def _cell_average(self, memory: np.ndarray, points: np.ndarray, width: int, rows: slice | None) -> np.ndarray:
         """Cell averages of a memory tensor at the rule's points (rows of ``width``)."""
-        weight = self.history.current_weight
-        if weight is not None and float(weight.value) != 0.0:
-            # the implicit trapezoid keeps the past in M; sigma_n also holds its current term (k/2) g(0) H(u_n, zeta_n)
-            memory = memory + float(weight.value) * source()
-        M = points.take(memory)
+        points = points[slice(None) if rows is None else rows]
+        M = np.take(memory.reshape(-1, width), points.ravel(), axis=0)
         if self.npts == 1:  # one point per cell: the average is the value
             return M
         return (M.reshape(-1, self.npts, width) * self.q_weights).sum(axis=1)
@@ -133,6 +149,8 @@ class Outputs:
 
     ``keep_until`` (a restart) keeps the levels already written up to that time and appends after them.
     """
+
+    BLOCK = 65536  # cells a block of the cell fields: 5 MB of each of its temporaries in 3-D
 
     def __init__(self, model, material: MaterialConfig, output: OutputConfig, outdir: Path | None,
                  keep_until: float | None = None) -> None:
@@ -177,21 +195,35 @@ class Outputs:
         return [s for s in (self.series, self.contact) if s is not None]
 
     def cell_fields(self) -> dict[str, np.ndarray]:
-        """The chosen cell fields on the owned cells: stresses as d*d rows, von Mises values."""
+        """The chosen cell fields on the owned cells: stresses as d*d rows, von Mises values (and sigma_33 beside a
+        plane-strain tensor). Computed in blocks of ``BLOCK`` cells: only the written arrays are whole."""
         want, out = set(self.names), {}
         if self.stresses is None:
             return out
-        elastic = self.stresses.elastic()
-        if want & {"stress", "von_mises"}:
-            out["stress"] = self.stresses.total(elastic)
-        out["elastic_stress"] = elastic
-        zz = {"stress": None, "elastic_stress": None}
-        if self.stresses.plane_strain:
-            zz["stress"], zz["elastic_stress"] = self.stresses.out_of_plane()
-            out["stress_zz"], out["elastic_stress_zz"] = zz["stress"], zz["elastic_stress"]
-        for tensor, scalar in (("stress", "von_mises"), ("elastic_stress", "von_mises_elastic")):
-            if scalar in want:
-                out[scalar] = von_mises_array(out[tensor], self.d, zz[tensor])
+        st = self.stresses
+        n, d = st.n_cells, self.d
+        tensors = [f for f in ("stress", "elastic_stress") if f in want]
+        for name in want & {"von_mises", "von_mises_elastic", "stress_zz", "elastic_stress_zz"}:
+            out[name] = np.empty(n)
+        for name in tensors:
+            out[name] = np.empty((n, d * d))
+            if st.plane_strain:
+                out[name + "_zz"] = np.empty(n)
+        st.prepare()
+        for start in range(0, n, self.BLOCK):
+            rows = slice(start, min(start + self.BLOCK, n))
+            block = {"elastic_stress": st.elastic(rows)}
+            if want & {"stress", "von_mises"}:
+                block["stress"] = st.total(block["elastic_stress"], rows)
+            zz = {"stress": None, "elastic_stress": None}
+            if st.plane_strain:
+                zz["stress"], zz["elastic_stress"] = st.out_of_plane(rows)
+                block["stress_zz"], block["elastic_stress_zz"] = zz["stress"], zz["elastic_stress"]
+            for tensor, scalar in (("stress", "von_mises"), ("elastic_stress", "von_mises_elastic")):
+                if scalar in want:
+                    block[scalar] = von_mises_array(block[tensor], d, zz[tensor])
+            for name, values in out.items():
+                values[rows] = block[name]
         return out
 
     def write(self, t: float) -> None:
@@ -236,6 +268,24 @@ class Outputs:
                 failure = failure or exc
         if failure is not None and not quiet:
             raise OutputError(str(failure), failure.t) from None
+
+
+def _centroid_strains(u: fem.Function, n_cells: int) -> StrainMap:
+    """eps(u)'s independent components at the centroids of the first ``n_cells`` local cells (their averages for a
+    P1 or P2 u on affine cells), as a table of the scalar basis gradients there."""
+    mesh = u.function_space.mesh
+    d = mesh.geometry.dim
+    V = u.function_space
+    S = fem.FunctionSpace(mesh, V.ufl_element().sub_elements()[0])
+    ndofs = S.dofmap.dof_layout.num_dofs
+    cells = np.arange(n_cells, dtype=np.int32)
+    centroid = np.full((1, d), 1.0 / (d + 1))
+    # a scalar trial function: a vector one in an Expression corrupts memory in dolfinx 0.5.2
+    grad = fem.Expression(ufl.grad(ufl.TrialFunction(S)), centroid).eval(cells).reshape(n_cells, 1, d, ndofs)
+    nodes = V.dofmap.list.array.reshape(-1, ndofs)[:n_cells]
+    bs = V.dofmap.index_map_bs
+    size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+    return StrainMap(grad, nodes, bs, cells[:, None], n_cells, size_v, pairs(d))
 
 
 def _vertex_values(f: fem.Function):

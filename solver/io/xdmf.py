@@ -63,12 +63,13 @@ This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import queue
 import re
 import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -136,9 +137,9 @@ class Layout:
     """
 
     comm: object
-    points: np.ndarray  # (owned nodes, gdim)
+    points: np.ndarray | None  # (owned nodes, gdim); None in a series' copy once it wrote the mesh
     node_keys: np.ndarray  # (owned nodes,)
-    cells: np.ndarray  # (owned cells, nodes per cell), node keys
+    cells: np.ndarray | None  # (owned cells, nodes per cell), node keys; None as points
     cell_keys: np.ndarray  # (owned cells,)
     cell_type: str  # XDMF TopologyType
     counts: dict[str, int] = field(default_factory=dict)  # filled by XDMFSeries: global rows per center
@@ -399,6 +400,9 @@ class XDMFSeries:
         self._setup_gather()
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
+        # the mesh is in its file now: neither the whole gathered mesh (rank 0) nor this rank's part is kept
+        self.points = self.cells = None
+        self.layout = dataclasses.replace(layout, points=None, cells=None)
 
     # ------------------------------------------------------------------ set-up
 
@@ -510,14 +514,17 @@ class XDMFSeries:
             if v.size != n * f.ncomp:
                 raise ValueError(f"field {f.name}: {v.shape} values for {n} rows of {f.ncomp} components")
             parts.append(v.astype(self.dtype, copy=False).ravel())
-        buf = np.concatenate(parts) if len(parts) > 1 else parts[0]
         comm = self.comm
-        if comm.size > 1:
+        if comm.size > 1:  # one Gatherv of the level: its buffer on each rank, the gathered level on rank 0
+            buf = np.concatenate(parts) if len(parts) > 1 else parts[0]
             recv = np.empty(sum(self.send_counts), dtype=self.dtype) if comm.rank == 0 else None
             comm.Gatherv(np.ascontiguousarray(buf), (recv, self.send_counts) if comm.rank == 0 else None, root=0)
-        else:
-            recv = buf
-        self._collective(lambda: self._write_level(float(t), list(self._global(recv))))
+            del buf
+            recv = [recv]
+        else:  # one process: each field's own rows, no level buffer
+            recv = parts
+        # a generator: each field is put in file order as it is written, one at a time
+        self._collective(lambda: self._write_level(float(t), self._global(recv)))
 
     def flush(self) -> None:
         """List every level written so far: close the open chunk and replace the XML (collective).
@@ -530,8 +537,9 @@ class XDMFSeries:
         if not self.closed:
             self._collective(flush)
 
-    def _global(self, recv: np.ndarray):
-        """Rank 0: each field's values in file order (one gather through an index computed once)."""
+    def _global(self, recv: list[np.ndarray]):
+        """Rank 0: each field's values in file order (one gather through an index computed once), one field at a
+        time; ``recv``: the gathered level (several ranks), or each field's rows (one process)."""
         if self._take is None:
             self._take = {}
             pos = 0
@@ -541,11 +549,16 @@ class XDMFSeries:
                     take = self._take.setdefault(f.name, np.empty(self.layout.counts[f.center] * f.ncomp, np.int64))
                     take.reshape(-1, f.ncomp)[r] = pos + np.arange(len(r) * f.ncomp).reshape(-1, f.ncomp)
                     pos += len(r) * f.ncomp
-        for f in self.fields:
-            values = recv[self._take[f.name]]
+        start = 0
+        for i, f in enumerate(self.fields):
+            if len(recv) == 1:
+                values = recv[0][self._take[f.name]]
+            else:  # the field's own array: its index less the field's place in the level
+                values = recv[i][self._take[f.name] - start]
+                start += len(recv[i])
             yield f.name, (values if f.ncomp == 1 else values.reshape(-1, f.ncomp))
 
-    def _write_level(self, t: float, fields: list[tuple[str, np.ndarray]]) -> None:
+    def _write_level(self, t: float, fields: Iterable[tuple[str, np.ndarray]]) -> None:
         """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
         self._raise_error()
         try:

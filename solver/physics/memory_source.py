@@ -315,7 +315,8 @@ class MemoryForce:
         self.d, self.pairs = source.d, source.pairs
         self.weights = point_weights(rule, source)
         self.strain_operator = source.strain_operator  # E (the source's own arrays)
-        self._m = np.empty((len(self.pairs), source.size_q))
+        # W m is formed in the source's A eps buffer: both are scratch of one call, never in use at once
+        self._m = source._a
 
     def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
         """out = B M = E^T (W m) (owned entries; ``out`` a ghosted vector of u's space)."""

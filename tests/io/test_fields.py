@@ -8,7 +8,7 @@ from dolfinx import fem
 from dolfinx.fem import petsc as fpetsc
 from petsc4py import PETSc
 
-from solver.config import load
+from solver.config import from_dict, load
 from solver.io.fields import CellStresses, Outputs
 from solver.physics.material import elasticity, strain, von_mises_array
 from solver.run.model import build_model
@@ -79,3 +79,57 @@ def test_implicit_trapezoid_stress_includes_the_current_level(comm, u_degree):
     cs = CellStresses(model, mat)
     got = cs.total(cs.elastic())
     assert np.allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("u_degree,memory", [(1, True), (1, False), (2, False)])
+def test_cell_stresses_in_3d_with_and_without_memory(comm, u_degree, memory):
+    """3-D Example 1: the strains from the history's source (memory) or from the writer's own gradient table at the
+    centroids (no memory; P1 and P2) give the assembled projection's cell averages."""
+    sets = ["mesh.nx=3", "mesh.ny=3", "mesh.nz=3", "time.k=0.05", f"discretization.u_degree={u_degree}",
+            "solver.linear='mumps'"]
+    cfg = load(ROOT / "configs/example1_3d.toml", sets)
+    if not memory:
+        document = {**cfg.document, "memory": {"kernel": "none"}}
+        cfg = from_dict(document, base=ROOT / "configs")
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(3):
+        stepper.step(n)
+    assert (model.history is not None) == memory
+    mesh, mat = model.geo.mesh, cfg.material
+    sig_el = elasticity(strain(model.u), mat.E, mat.nu, mat.model)
+    want_el = projection(sig_el, mesh, ufl.dx(metadata={"quadrature_degree": 2}))
+    cs = CellStresses(model, mat)
+    got_el = cs.elastic()
+    scale = np.abs(want_el).max()
+    assert scale > 0
+    assert np.allclose(got_el, want_el, rtol=0, atol=1e-13 * scale)
+    if memory:
+        want = projection(sig_el + model.history.M, mesh, model.rule.dx)
+        assert np.allclose(cs.total(got_el), want, rtol=0, atol=1e-13 * np.abs(want).max())
+
+
+def test_cell_fields_in_blocks_equal_the_whole(comm, shared_tmp, monkeypatch):
+    """Outputs computes the cell fields block by block (only the written arrays whole): blocks of 7 cells give the
+    stresses and von Mises values of CellStresses over all cells at once."""
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05", "material.model='plane_strain'",
+                                                "solver.quadrature_degree=2"])
+    cfg = cfg.replace({"output": {"fields": ["stress", "elastic_stress", "von_mises", "von_mises_elastic",
+                                             "stress_zz"]}})
+    model = build_model(cfg, comm)
+    stepper = Stepper(model)
+    for n in range(3):
+        stepper.step(n)
+    monkeypatch.setattr(Outputs, "BLOCK", 7)
+    out = Outputs(model, cfg.material, cfg.output, shared_tmp)
+    got = out.cell_fields()
+    cs = CellStresses(model, cfg.material)
+    elastic = cs.elastic()
+    total = cs.total(elastic)
+    zz, zz_el = cs.out_of_plane()
+    assert np.array_equal(got["elastic_stress"], elastic) and np.array_equal(got["stress"], total)
+    assert np.array_equal(got["stress_zz"], zz) and np.array_equal(got["elastic_stress_zz"], zz_el)
+    assert np.array_equal(got["von_mises"], von_mises_array(total, 2, zz))
+    assert np.array_equal(got["von_mises_elastic"], von_mises_array(elastic, 2, zz_el))
+    assert len(elastic) > 7 and np.abs(total - elastic).max() > 0
+    out.close()

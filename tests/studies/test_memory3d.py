@@ -13,8 +13,11 @@ def test_allocated_counts_the_base_a_view_keeps_alive():
 
 @pytest.mark.serial
 def test_breakdown_lists_the_stages_the_strain_operator_and_the_matrices():
-    m = memory3d.measure(3, "iterative")
-    assert m["dofs"] == 3 * 4 ** 3 and list(m["stages_mib"])[:3] == ["imports", "build_model", "level 0"]
+    m = memory3d.measure(3, "iterative")  # as the CLI runs it: written levels and a checkpoint
+    assert m["dofs"] == 3 * 4 ** 3 and list(m["stages_mib"])[:3] == ["imports", "build_model", "level 0 (written)"]
+    assert "level 2 (written)" in m["stages_mib"]
+    bare = memory3d.measure(3, "iterative", outputs=False)
+    assert list(bare["stages_mib"])[:3] == ["imports", "build_model", "level 0"]
     E = sum(v for k, v in m["arrays"].items() if k.startswith("model.history.H.strain_operator"))
     assert E > 0 and any(s == (m["dofs"], m["dofs"]) for _, s, _ in m["matrices"])
     text = memory3d.report(m)

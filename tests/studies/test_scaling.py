@@ -128,6 +128,8 @@ def test_bench_scaling_writes_its_files_merges_bench_json_and_resumes(tmp_path):
     assert sorted(cases) == ["iterative/np1/n2", "iterative/np1/n3", "iterative/np2/n2", "iterative/np2/n3"]
     assert all(c["status"] == "ok" and c["steps"] == 1 for c in cases.values())
     assert np.isclose(cases["iterative/np1/n3"]["contact_force"], cases["iterative/np2/n3"]["contact_force"], rtol=1e-9)
+    # each case again as `solver run` with its outputs and a checkpoint: its peak and step
+    assert all(c["cli_status"] == "ok" and c["cli_peak_mib_max"] > 50 and c["cli_step_s"] > 0 for c in cases.values())
     assert data["scaling"]["fit"]["iterative"]["step_s"]["points"] == 4
     anchors = data["scaling"]["anchors"]  # the plain-elasticity anchor beside every case
     assert sorted(anchors) == ["plain-gamg/np1/n2", "plain-gamg/np1/n3", "plain-gamg/np2/n2", "plain-gamg/np2/n3"]
@@ -155,7 +157,8 @@ def test_anchor_table_reads_every_case_as_a_ratio_to_the_plain_solve():
     the plain factorization."""
     n, dofs = 20, scaling.dofs_of(20)
     cases = {scaling.key("iterative", 1, n): _case("iterative", 1, n, step_s=0.3, krylov_per_solve=30.0,
-                                                    peak_mib_max=400.0, peak_mib_sum=400.0),
+                                                    peak_mib_max=400.0, peak_mib_sum=400.0, cli_peak_mib_max=500.0,
+                                                    cli_step_s=0.35),
              scaling.key("mumps", 1, n): _case("mumps", 1, n, step_s=0.05, level0_s=12.0, peak_mib_max=600.0,
                                                peak_mib_sum=600.0, level0_setups=2)}
     plain = {"n": n, "nproc": 1, "dofs": dofs, "status": "ok", "setup_s": 0.5, "solve_s": 0.25, "iterations": 20,
@@ -165,7 +168,7 @@ def test_anchor_table_reads_every_case_as_a_ratio_to_the_plain_solve():
                scaling.anchor_key("gamg", 2, n): dict(plain, solver="gamg", nproc=2, status="failed", reason="x")}
     text = "\n".join(scaling.anchor_table({"cases": cases, "anchors": anchors}))
     per_dof = f"{400 * 2 ** 20 / dofs:,.0f}"
-    assert f"| iterative | 1.20 | - | - | 1.50 | 2.00 | {per_dof} |" in text
+    assert f"| iterative | 1.20 | - | - | 1.50 | 2.00 | {per_dof} | 2.50 | 1.40 |" in text  # the CLI's: 500 / 200
     assert "| mumps | 5.00 | 3.00 | 1.50 | - | 3.00 |" in text  # level 0 holds two factorizations
     assert "| 20 | 27,783 | 2 | gamg | failed: x |" in text
 
