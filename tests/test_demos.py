@@ -11,7 +11,7 @@ from conftest import ROOT, mpi_env
 DEMOS = sorted((ROOT / "demos").glob("*.py"))
 CHARTS = {"example1": ["example1_series.png", "example1_damage.png"], "parameter_study": ["parameter_study.png"],
           "own_scene": ["plate_with_hole.msh", "plate_with_hole/solution.xdmf"], "read_results": ["read_results.png"],
-          "hertz3d": ["hertz3d.msh"]}
+          "hertz3d": ["hertz3d.msh", "hertz3d_pressure.png"]}
 # each demo's environment in the tests: hertz3d at a coarser mesh (0.04 at the contact instead of 0.015)
 DEMO_ENV = {"hertz3d": {"HERTZ_H": "0.04"}}
 
