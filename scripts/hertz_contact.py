@@ -128,7 +128,7 @@ def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad
 
     with tempfile.TemporaryDirectory() as tmp:
         msh = Path(tmp) / "hertz3d.msh"
-        summary = mesher.write(msh, h, size=size, grade=0.6 * size, refine=refine)
+        summary = mesher.write(msh, h, size=size, near=0.15, far=0.2 * size, grade=0.6 * size, refine=refine)
         scene = {
             "mesh": {"kind": "gmsh", "file": str(msh)},
             "material": {"E": E, "nu": NU, "model": "3d"}, "discretization": {"u_degree": degree},
@@ -217,10 +217,29 @@ def sphere_table(rows: list[dict]) -> list[str]:
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         tets = int(r["mesh"].split(": ")[1].split()[0])
-        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}) | {tets} | {r['dofs']} | "
+        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, quadrature degree {r['quad']}) | "
+                   f"{tets} | {r['dofs']} | "
                    f"{r['newton']} | {r['force']:.5g} | {r['a']:.4g} | {r['a'] / r['h']:.1f} | {r['centre'] - 1:+.2%} | "
                    f"{r['rec_central'] - 1:+.2%} | {r['law_central'] - 1:+.2%} | {r['rec_l2']:.2%}, {r['law_l2']:.1%} | "
                    f"{r['vertex_max']:.2%}, {r['vertex_rms']:.2%} | {r['seconds']:.0f} |")
+    return out
+
+
+def reference_table(rows: list[dict]) -> list[str]:
+    """Each case against the finest mesh of the highest degree with the same L and μ (the same continuous problem)."""
+    out = ["Against the finest mesh of the highest degree for the same L and μ (the same continuous problem):\n",
+           "| mesh | reference | F / F_ref − 1 | the law's mean near the axis / ref − 1 | reported mean / the law's ref − 1 |",
+           "|---|---|---|---|---|"]
+    for r in rows:
+        same = [q for q in rows if q["size"] == r["size"] and q["mu"] == r["mu"] and q["quad"] == 2 * q["degree"]]
+        ref = max(same, key=lambda q: (q["degree"], -q["h"])) if same else r
+        if ref is r:
+            continue
+        law = r["law_central"] * r["p0"] / (ref["law_central"] * ref["p0"]) - 1  # the means themselves, not / p0
+        rec = r["rec_central"] * r["p0"] / (ref["law_central"] * ref["p0"]) - 1
+        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, quadrature degree {r['quad']}) | "
+                   f"P{ref['degree']}, h = {ref['h']:g} | "
+                   f"{r['force'] / ref['force'] - 1:+.2%} | {law:+.2%} | {rec:+.2%} |")
     return out
 
 
@@ -283,8 +302,8 @@ def main(argv: list[str] | None = None) -> int:
         args.sphere_out.write_text("\n".join([
             f"# Hertz contact in 3-D: the sphere\n\n`{cmd.strip()}`\n",
             f"E = {E}, ν = {NU}, R = {R}, δ = 0.01; the quarter block (0, L)³ clamped at z = L (meshes/hertz3d.py "
-            f"--size L --h {args.sphere_h} --grade 0.6L --refine n); p₀, a: Hertz's for the measured force.\n",
-            *sphere_table(spheres), ""]) + "\n")
+            f"--size L --h {args.sphere_h} --near 0.15 --far 0.2L --grade 0.6L --refine n); p₀, a: Hertz's for the "
+            "measured force.\n", *sphere_table(spheres), "", *reference_table(spheres), ""]) + "\n")
         print(f"wrote {args.sphere_out}")
     return 0
 
