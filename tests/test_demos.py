@@ -11,9 +11,9 @@ from conftest import ROOT, mpi_env
 DEMOS = sorted((ROOT / "demos").glob("*.py"))
 CHARTS = {"example1": ["example1_series.png", "example1_damage.png"], "parameter_study": ["parameter_study.png"],
           "own_scene": ["plate_with_hole.msh", "plate_with_hole/solution.xdmf"], "read_results": ["read_results.png"],
-          "hertz3d": ["hertz3d.msh"]}
-# each demo's environment in the tests: hertz3d at a coarser mesh (0.04 at the contact instead of 0.015)
-DEMO_ENV = {"hertz3d": {"HERTZ_H": "0.04"}}
+          "hertz3d": ["hertz3d.msh", "hertz3d_pressure.png"]}
+# each demo's environment in the tests: hertz3d at a coarser mesh (0.06 at the contact instead of 0.03)
+DEMO_ENV = {"hertz3d": {"HERTZ_H": "0.06"}}
 
 
 def test_every_demo_is_listed():
@@ -30,10 +30,10 @@ def test_demo_runs(demo, tmp_path):
     for name in CHARTS[demo.stem]:
         assert (tmp_path / name).is_file(), name
     assert "Traceback" not in res.stderr
-    if demo.stem == "hertz3d":  # the contact radius against Hertz's: -3.2% at this size (-0.6% at the demo's)
-        line = next(ln for ln in res.stdout.splitlines() if ln.startswith("contact radius"))
-        assert abs(float(line.rsplit(":", 1)[1].strip().rstrip("%"))) < 5.0, line
-
+    if demo.stem == "hertz3d":  # against Hertz at this size (P2, h = 0.06): radius -0.28%, peak -2.3% (demo's: +0.01%, -0.5%)
+        out = {ln.split(maxsplit=1)[0]: float(ln.rsplit(":", 1)[1].strip().rstrip("%")) for ln in res.stdout.splitlines()
+               if ln.startswith(("contact radius", "peak pressure"))}
+        assert abs(out["contact"]) < 2.0 and abs(out["peak"]) < 5.0, res.stdout
 
 def _cells(text: str) -> tuple[list[str], list[tuple[str, list[str]]]]:
     """(the header's lines, [(kind, lines)] of the cells) of a jupytext percent script: the header is the comment
