@@ -90,6 +90,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
         self.reduced_iterations = 0  # over the run
         self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start
+        self._level_time: float | None = None  # the time of the last level solved
         self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)]
 
     def state(self) -> dict[str, np.ndarray]:
@@ -120,10 +121,15 @@ class CondensedNewtonSolver(DisplacementMethod):
             first = 0
         self.test.start_level(scale)
         if self.points is not None:
+            # a level solved again (Heun's corrector, at the same time) starts next to its solution: no prediction,
+            # and the predictor keeps the level's own start
+            again = self._level_time is not None and self.problem.level_time == self._level_time
             reduced = PointReduced(self.cond, self.problem, self.reduced_work, core.settings, scale, self.points,
-                                   self.previous)
+                                   None if again else self.previous)
             history, v, step = reduced.run()
-            self.previous = reduced.start
+            if not again:
+                self.previous = reduced.start
+            self._level_time = self.problem.level_time
         else:
             reduced = Reduced(self.cond, self.problem, self.reduced_work, core.settings, scale)
             history, v, step = reduced.run()
