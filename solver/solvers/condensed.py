@@ -230,7 +230,8 @@ class CondensedNewtonSolver(DisplacementMethod):
                 # tried, as energy_newton's next ones would be, while they lower ||F||
                 keep, keep_norm = u.copy(), out.history[-1]
                 out.reason = R.ITERATING
-            if out.reason == R.ITERATING and solved is not None and self._kept(u, solved, it):
+            if (out.reason == R.ITERATING and solved is not None and self.test.near_floor(out.history[-1])
+                    and self._kept(u, solved, it)):
                 out.reason = CONVERGED_SET
             if out.reason != R.ITERATING:
                 break
