@@ -44,11 +44,12 @@ from solver.solvers.settings import LinearSettings, NewtonSettings
 # is this many times K's diagonal there; where the contact is soft, taking the normal out costs Krylov iterations
 # (docs/benchmarks/performance.md, "Krylov iterations and the contact stiffness")
 STIFF_CONTACT_RATIO = 100.0
-# a kept active set ends a level where ||F|| is at most this many times rtol * scale: one direct solve of the set's
-# equations leaves ~eps ||J|| ||u|| (4e-6 on hard.toml's first level, where the next step takes it to 2e-12 and
-# moves the contact force by 3e-8 relative: not round-off to accept), the floor that a further step does not lower
-# is ~20 rtol * scale on configs/moving_contact.toml (docs/model.md §4)
-SET_FLOOR = 100.0
+# a kept active set ends a level where ||F|| is at most this many times the contact term's round-off, eps times
+# the norm of its summands (1/mu)(|u_nu| + |g|) phi n at the penetrating points (ContactTerm.roundoff): on
+# configs/moving_contact.toml the residual after the steps through K was 0.07-4.5 times that (median 0.16) and a
+# further step did not lower it; on column3d.toml's first level one direct solve left 1.9e-9 (100 rtol * scale
+# accepted it), where the next step reached 1e-15 and moved the contact pressure by 7e-8 relative (docs/model.md §4)
+SET_FLOOR = 10.0
 
 
 def contact_normals(problem: DisplacementProblem) -> np.ndarray:
@@ -79,7 +80,7 @@ class NewtonTest:
     cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE) instead
     of running on to max_it. While ``exact_steps`` is set (plain Newton's full steps, solved by a direct solver, on
     a piecewise linear law without implicit memory term), an iterate that keeps the active set its step was solved
-    on stops the level (CONVERGED_SET) where ||F|| is within SET_FLOOR of the tolerance: the step solved that set's
+    on stops the level (CONVERGED_SET) where ||F|| is within SET_FLOOR of its round-off: the step solved that set's
     linear equations, so the iterate is the level's solution to round-off, whose floor (~ eps ||J|| ||u||, with 1/mu
     ~ 1e10) may lie above rtol * scale; the step test would stop it one step later, on a step below rtol ||u||.
     """
@@ -98,8 +99,9 @@ class NewtonTest:
         self.scale = scale
 
     def near_floor(self, fnorm: float) -> bool:
-        """Whether ||F|| is low enough for a kept active set to end the level (:data:`SET_FLOOR`)."""
-        return fnorm <= SET_FLOOR * self.rtol * self.scale
+        """Whether ||F|| is within SET_FLOOR of the contact term's round-off at the current u
+        (:meth:`ContactTerm.roundoff`): where a kept active set may end the level. Collective."""
+        return fnorm <= SET_FLOOR * self.contact.roundoff()
 
     def __call__(self, it: int, xnorm: float, snorm: float, fnorm: float) -> int:
         """The SNES reason after iteration ``it`` (ITERATING to go on)."""
