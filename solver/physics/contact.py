@@ -98,6 +98,14 @@ class ContactTerm:
         # int_Gamma_C (1/mu) n . w ds: the contact's normal at Gamma_C's nodes, scaled by its stiffness (normal_stiffness);
         # a law without a fixed stiffness (power: p'(r) = c m r^(m-1)) is left out
         stiff = [(p, p.contact_law.stiffness) for p in parts if p.contact_law.stiffness is not None]
+        # the size of the contact term's summands where a point penetrates: (1/mu) (|u_nu| + |g|) n . w, whose
+        # round-off (eps times it) is the residual's floor there, u_nu - g cancelling (roundoff)
+        nrm = ufl.FacetNormal(geo.mesh)
+        self._size_form = fem.form(sum(
+            constant(w, k) * ufl.conditional(ufl.gt(penetration(u, nrm, gap_function(p, geo, degree)), 0.0),
+                                             abs(ufl.dot(u, nrm)) + abs(gap_function(p, geo, degree)), 0.0)
+            * ufl.dot(w, nrm) * _ds(geo, p, degree) for p, k in stiff)) if stiff else None
+        self._size = fpetsc.create_vector(self._size_form) if stiff else None
         self._normal_form = fem.form(sum(constant(w, k) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
                                          for p, k in stiff)) if stiff else None
 
@@ -112,6 +120,19 @@ class ContactTerm:
             fpetsc.assemble_vector(out, self._normal_form)
         out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         out.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def roundoff(self) -> float:
+        """eps times the norm of the contact term's summands at the current u ((1/mu)(|u_nu| + |g|) int phi n ds at
+        the penetrating points): the residual's round-off floor from the contact term, where u_nu - g cancels and
+        1/mu amplifies what is left (0 without a law of fixed stiffness). Collective."""
+        if self._size_form is None:
+            return 0.0
+        with self._size.localForm() as local:
+            local.set(0.0)
+        fpetsc.assemble_vector(self._size, self._size_form)
+        self._size.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fpetsc.set_bc(self._size, self.bcs, scale=0.0)
+        return float(np.finfo(float).eps * self._size.norm())
 
     def add_residual(self, F: PETSc.Vec) -> float:
         """F += j(u, .) with the clamped rows zero; returns ||j(u, .)|| (F must be zero on entry)."""

@@ -107,6 +107,7 @@ class DisplacementProblem:
     def __init__(self, u: fem.Function, ops: Operators, contact: ContactTerm | None, implicit_term=None) -> None:
         self.u, self.ops, self.contact = u, ops, contact
         self.bcs = ops.bcs
+        self.level_time: float | None = None  # the time of the level begun last (begin_level)
         # F_m(u; w) (UFL), its compiled form and its Jacobian's: nonlinear in u_n, re-assembled at every evaluation
         self.implicit_memory = implicit_term(u, ops.w) if implicit_term is not None else None
         self.Fm = self.am = self.Am = None
@@ -161,6 +162,7 @@ class DisplacementProblem:
 
     def begin_level(self, t: float) -> float:
         """Assemble b_n; return the force scale of the convergence tests: max(||b_n||, ||j(u_{n-1})||)."""
+        self.level_time = t  # the level's time (a method may tell a level solved again, Heun's corrector, by it)
         self.ops.assemble_rhs(t)
         if not self._carried and self.contact is not None:
             # no carried residual (first level, or after a failure): ||j(u_{n-1})|| from a full evaluation

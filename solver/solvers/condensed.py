@@ -52,6 +52,7 @@ from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
 from solver.solvers.condensation import Condensation
 from solver.solvers.contact_dofs import ContactDofs, contact_block
+from solver.solvers.cycle_watch import CONVERGED_SET
 from solver.solvers.damped_newton import DampedResult, has_energy
 from solver.solvers.energy_newton import EnergyNewtonSolver
 from solver.solvers.linear import REASONS_SNES
@@ -89,6 +90,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
         self.reduced_iterations = 0  # over the run
         self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start
+        self._level_time: float | None = None  # the time of the last level solved
         self.reduced_work = [problem.u.vector.duplicate() for _ in range(2)]
 
     def state(self) -> dict[str, np.ndarray]:
@@ -119,10 +121,15 @@ class CondensedNewtonSolver(DisplacementMethod):
             first = 0
         self.test.start_level(scale)
         if self.points is not None:
+            # a level solved again (Heun's corrector, at the same time) starts next to its solution: no prediction,
+            # and the predictor keeps the level's own start
+            again = self._level_time is not None and self.problem.level_time == self._level_time
             reduced = PointReduced(self.cond, self.problem, self.reduced_work, core.settings, scale, self.points,
-                                   self.previous)
+                                   None if again else self.previous)
             history, v, step = reduced.run()
-            self.previous = reduced.start
+            if not again:
+                self.previous = reduced.start
+            self._level_time = self.problem.level_time
         else:
             reduced = Reduced(self.cond, self.problem, self.reduced_work, core.settings, scale)
             history, v, step = reduced.run()
@@ -137,7 +144,7 @@ class CondensedNewtonSolver(DisplacementMethod):
             pc = self.points                                       # where it is not v's own active set
             r = pc.NB @ v + pc.c
             if not np.array_equal(reduced.state, pc.state(r)):
-                piece = (pc.jacobian(reduced.state), pc.piece_force(r, reduced.state) - pc.force(r))
+                piece = (pc.jacobian(reduced.state), pc.piece_force(r, reduced.state) - pc.force(r), reduced.state)
             # (on v's own set Newton's step at u is that piece's solution, with C assembled as the residual is:
             # C from the points differs from it by round-off, which 1/mu = 1e12 makes worth a second step)
         out = self._polish(history, step, piece)
@@ -154,18 +161,41 @@ class CondensedNewtonSolver(DisplacementMethod):
         name = REASONS_SNES.get(out.reason, str(out.reason))
         return self.energy.finish(out, name, scale)
 
-    def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec, piece=None) -> float:
+    def _kept(self, u: PETSc.Vec, solved, it: int) -> bool:
+        """Whether u, the end of a step through K, keeps the active set the step was solved on (``solved``: the
+        step's set and piece): then u solves that set's linear equations, the level's to round-off."""
+        key, step_piece = solved
+        now = self._set_at(u, step_piece)
+        same = now.shape == key.shape and bool(np.array_equal(now, key))
+        return self.dofs.comm.allreduce(same, op=MPI.LAND)
+
+    def _set_at(self, u: PETSc.Vec, piece) -> np.ndarray:
+        """The active set at u in the form a step's ``piece`` names it: the points' states where the step solved
+        a piece of the reduced iteration, else C_BB assembled at u (it depends on the set alone). Collective."""
+        if piece is not None:
+            pc = self.points
+            return pc.state(pc.NB @ self.dofs.gather(u.array_r[self.dofs.local]) + pc.c)
+        contact = self.problem.contact
+        self.problem.sync(u)
+        assemble_without_diagonal(contact.C, contact.jacobian_form, contact.bcs)
+        return contact_block(contact.C, self.dofs, u.getOwnershipRange()[0])
+
+    def _step_through_k(self, u: PETSc.Vec, F: PETSc.Vec, d: PETSc.Vec,
+                        piece=None) -> tuple[float, np.ndarray]:
         """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
-        the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d|. Two solves with K. ``piece``: (C_BB,
+        the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d| and the active set the step solved
+        (:meth:`_set_at`'s form). Two solves with K. ``piece``: (C_BB,
         dj_B) of the quadratic piece the reduced iteration ended on, the step then solving that piece (F + P^T dj_B
         is its residual); default: Newton's step, C assembled at u."""
         problem, dofs, cond = self.problem, self.dofs, self.cond
         if piece is not None:
-            C, dj = piece
+            C, dj = piece[0], piece[1]
             F.array[dofs.local] += dofs.mine(dj)
+            key = piece[2]
         else:
             assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
             C = contact_block(problem.contact.C, dofs, u.getOwnershipRange()[0])
+            key = C
         cond.ksp.solve(F, d)  # K^{-1} F
         dB = -np.linalg.solve(np.eye(dofs.m) + cond.S @ C, dofs.gather(d.array_r[dofs.local]))
         d.scale(-1.0)
@@ -173,7 +203,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         d.array[dofs.local] = dofs.mine(dB)  # d_B itself (the contact term amplifies its error by 1/mu)
         fpetsc.set_bc(d, problem.bcs, scale=0.0)
         u.axpy(1.0, d)
-        return d.norm()
+        return d.norm(), key
 
     def _polish(self, history: list[float], step: float, piece=None) -> DampedResult:
         """Full Newton steps from the rebuilt u, each solved through K (:meth:`_step_through_k`, no
@@ -186,6 +216,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         u, F, d = problem.u.vector, *self.reduced_work
         out = DampedResult(R.ITERATING, len(history), list(history))
         snorm, after, keep, keep_norm = step, int(step > 0.0), None, 0.0
+        solved = None  # the active set the last step through K solved (None: no step yet)
         for it in range(POLISH_STEPS + 1):
             problem.evaluate(u, F)
             out.history.append(F.norm())
@@ -199,6 +230,9 @@ class CondensedNewtonSolver(DisplacementMethod):
                 # tried, as energy_newton's next ones would be, while they lower ||F||
                 keep, keep_norm = u.copy(), out.history[-1]
                 out.reason = R.ITERATING
+            if (out.reason == R.ITERATING and solved is not None and self.test.near_floor(out.history[-1])
+                    and self._kept(u, solved, it)):
+                out.reason = CONVERGED_SET
             if out.reason != R.ITERATING:
                 break
             if it == POLISH_STEPS:
@@ -208,7 +242,9 @@ class CondensedNewtonSolver(DisplacementMethod):
                     out.history[-1], out.reason = keep_norm, R.CONVERGED_SNORM_RELATIVE
                 break
             out.iterations += 1
-            snorm = self._step_through_k(u, F, d, piece if it == 0 else None)
+            step_piece = piece if it == 0 else None
+            snorm, key = self._step_through_k(u, F, d, step_piece)
+            solved = (key, step_piece)
         if keep is not None:
             keep.destroy()
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)

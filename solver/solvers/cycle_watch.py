@@ -13,6 +13,9 @@ from petsc4py import PETSc
 # SNES has no reason code for a cycle: this one stands for it inside the solver (named CYCLE to the user)
 DIVERGED_CYCLE = PETSc.SNES.ConvergedReason.DIVERGED_INNER
 CYCLE = "DIVERGED_ACTIVE_SET_CYCLE"
+# ... nor for a Newton step whose end keeps the active set it was solved on (the piecewise linear law's finite
+# termination: the step solved that set's linear equations, so its end is the level's solution to round-off)
+CONVERGED_SET = PETSc.SNES.ConvergedReason.CONVERGED_ITS
 
 
 class ActiveSetCycleWatch:

@@ -27,7 +27,7 @@ from solver.errors import DisplacementSolveError
 from solver.physics.contact import ContactTerm
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, ComplianceContinuation
-from solver.solvers.cycle_watch import CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
+from solver.solvers.cycle_watch import CONVERGED_SET, CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
 from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
     REASONS_SNES,
@@ -44,6 +44,12 @@ from solver.solvers.settings import LinearSettings, NewtonSettings
 # is this many times K's diagonal there; where the contact is soft, taking the normal out costs Krylov iterations
 # (docs/benchmarks/performance.md, "Krylov iterations and the contact stiffness")
 STIFF_CONTACT_RATIO = 100.0
+# a kept active set ends a level where ||F|| is at most this many times the contact term's round-off, eps times
+# the norm of its summands (1/mu)(|u_nu| + |g|) phi n at the penetrating points (ContactTerm.roundoff): on
+# configs/moving_contact.toml the residual after the steps through K was 0.07-4.5 times that (median 0.16) and a
+# further step did not lower it; on column3d.toml's first level one direct solve left 1.9e-9 (100 rtol * scale
+# accepted it), where the next step reached 1e-15 and moved the contact pressure by 7e-8 relative (docs/model.md §4)
+SET_FLOOR = 10.0
 
 
 def contact_normals(problem: DisplacementProblem) -> np.ndarray:
@@ -72,7 +78,11 @@ class NewtonTest:
     With 1/mu ~ 1e10 the residual has a round-off floor ~ eps ||J|| ||u|| that can exceed rtol * scale; a
     correction below rtol ||u|| then means the active set is settled and the direct solve exact. While the
     cycle watch is watching, an iterate whose active set is revisited stops the level (DIVERGED_CYCLE) instead
-    of running on to max_it.
+    of running on to max_it. While ``exact_steps`` is set (plain Newton's full steps, solved by a direct solver, on
+    a piecewise linear law without implicit memory term), an iterate that keeps the active set its step was solved
+    on stops the level (CONVERGED_SET) where ||F|| is within SET_FLOOR of its round-off: the step solved that set's
+    linear equations, so the iterate is the level's solution to round-off, whose floor (~ eps ||J|| ||u||, with 1/mu
+    ~ 1e10) may lie above rtol * scale; the step test would stop it one step later, on a step below rtol ||u||.
     """
 
     def __init__(self, rtol: float, max_it: int, cycles: ActiveSetCycleWatch, contact: ContactTerm | None) -> None:
@@ -81,11 +91,17 @@ class NewtonTest:
         # where set (auto's Newton, which has a take-over): a run of this many iterations each raising ||F|| stops
         # the solve (DIVERGED_DTOL); None: no such test
         self.growth_limit: int | None = None
+        self.exact_steps = False  # set by NewtonCore.plain_newton where a kept active set ends the level
         self._last, self._grown = np.inf, 0
 
     def start_level(self, scale: float) -> None:
         """A new level, whose force scale is ``scale`` (||F|| <= rtol * scale)."""
         self.scale = scale
+
+    def near_floor(self, fnorm: float) -> bool:
+        """Whether ||F|| is within SET_FLOOR of the contact term's round-off at the current u
+        (:meth:`ContactTerm.roundoff`): where a kept active set may end the level. Collective."""
+        return fnorm <= SET_FLOOR * self.contact.roundoff()
 
     def __call__(self, it: int, xnorm: float, snorm: float, fnorm: float) -> int:
         """The SNES reason after iteration ``it`` (ITERATING to go on)."""
@@ -97,13 +113,17 @@ class NewtonTest:
             return R.CONVERGED_FNORM_ABS
         if it > 0 and snorm <= rtol * xnorm:
             return R.CONVERGED_SNORM_RELATIVE
+        key = self.contact.active_set_at() if it > 0 and (self.exact_steps or self.cycles.watching) else None
+        if self.exact_steps and key is not None and self.near_floor(fnorm) and self.contact.comm.allreduce(
+                key == self.contact.fingerprint(), op=MPI.LAND):
+            return CONVERGED_SET
         if it >= self.max_it:
             return R.DIVERGED_MAX_IT
         self._grown = self._grown + 1 if (it > 0 and fnorm > self._last) else 0
         self._last = fnorm
         if self.growth_limit is not None and self._grown >= self.growth_limit:
             return R.DIVERGED_DTOL
-        if self.cycles.watching and it > 0 and self.cycles.revisited(self.contact.active_set_at()):
+        if self.cycles.watching and key is not None and self.cycles.revisited(key):
             return DIVERGED_CYCLE
         return R.ITERATING
 
@@ -212,10 +232,12 @@ class NewtonCore:
         """SNES on the level from u; its reason, residual history and iterations."""
         u = self.problem.u
         self.cycles.start()
+        self.test.exact_steps = self.cycles.enabled and not self.iterative
         try:
             self.snes.solve(None, u.vector)
         finally:
             self.cycles.stop()
+            self.test.exact_steps = False
         self._initial = None
         u.x.scatter_forward()
         history, _ = self.snes.getConvergenceHistory()

@@ -47,6 +47,27 @@ def test_jacobian_is_rebuilt_only_when_the_active_set_changes(comm):
     assert np.isfinite(term.C.norm())
 
 
+def test_roundoff_is_eps_times_the_summands_at_the_penetrating_points(comm):
+    """ContactTerm.roundoff: 0 where nothing penetrates; where a part penetrates, eps (1/mu) (|u_nu| + |g|) times
+    the norm of int phi n ds over it, which does not depend on how deep (|u_nu| is the displacement, not the
+    penetration) but on how far from zero u_nu and g are."""
+    cfg = from_dict({"mesh": {"nx": 4, "ny": 4}, "memory": {"kernel": "none"}, "damage": {"enabled": False}})
+    model = build_model(cfg, comm)
+    term = model.mech.contact
+    assert term.roundoff() == 0.0
+    x = model.u.function_space.tabulate_dof_coordinates()
+    u = model.u.x.array.reshape(-1, 2)
+    u[:, 1] = -1e-3  # the whole bottom penetrates (gap 0)
+    model.u.x.scatter_forward()
+    small = term.roundoff()
+    u[:, 1] = -1e-1
+    model.u.x.scatter_forward()
+    assert small > 0.0 and term.roundoff() == pytest.approx(100.0 * small, rel=1e-12)
+    u[:, 1] = -1e-1 * (x[:, 0] < 0.5)  # the left half only: a smaller floor
+    model.u.x.scatter_forward()
+    assert 0.0 < term.roundoff() < 100.0 * small
+
+
 def test_contact_term_is_the_ufl_residual(comm):
     cfg = from_dict({"mesh": {"nx": 4, "ny": 4}, "memory": {"kernel": "none"}, "damage": {"enabled": False}})
     model = build_model(cfg, comm)

@@ -167,3 +167,24 @@ def test_a_ksp_reads_its_own_options_only():
     assert np.allclose(x.array, [0.5, 0.25])
     for obj in (one, two, three, A, x, b):
         obj.destroy()
+
+
+def test_a_kept_active_set_ends_the_level_near_the_floor_and_only_with_exact_steps():
+    """CONVERGED_SET where the step's end keeps the set it was solved on (the fingerprint of the last Jacobian),
+    ||F|| within SET_FLOOR of the contact term's round-off and exact_steps set (plain Newton, direct solve); not
+    otherwise, whatever rtol * scale is."""
+    from solver.solvers.cycle_watch import CONVERGED_SET
+    from solver.solvers.newton import SET_FLOOR
+
+    now = {"key": b"a"}
+    contact = SimpleNamespace(active_set_at=lambda: now["key"], fingerprint=lambda: b"a", comm=MPI.COMM_SELF,
+                              roundoff=lambda: 1e-3)  # rtol * scale = 1e-5 below it: the floor decides
+    test = _test(None, contact)
+    near, far = 0.5 * SET_FLOOR * 1e-3, 2.0 * SET_FLOOR * 1e-3
+    assert test(1, 1.0, 1.0, near) == R.ITERATING  # exact_steps off: damped steps keep sets without solving
+    test.exact_steps = True
+    assert test(0, 1.0, 0.0, near) == R.ITERATING  # no step yet
+    assert test(1, 1.0, 1.0, near) == CONVERGED_SET > 0
+    assert test(1, 1.0, 1.0, far) == R.ITERATING  # above the round-off: another step
+    now["key"] = b"b"
+    assert test(1, 1.0, 1.0, near) == R.ITERATING  # the set moved
