@@ -135,13 +135,6 @@ class ContactTerm:
             self._last = values.copy()
         return changed
 
-    def active_set_moved(self) -> bool:
-        """Whether the active set at the current u differs from the last assembled Jacobian's (that one is kept:
-        the next :meth:`assemble_jacobian` still compares with it). Collective."""
-        values = self._fingerprint_at()
-        moved = self._last is None or not np.array_equal(values, self._last)
-        return bool(self.comm.allreduce(moved, op=MPI.LOR))
-
     def fingerprint(self) -> bytes:
         """This rank's part of the last assembled C's fingerprint (it identifies the active set)."""
         return b"" if self._last is None else self._last.tobytes()

@@ -17,11 +17,8 @@ method's own test and limit) takes one or two steps. The stages need not converg
 close; the level's solution is that of the last stage, the stiff law's, to the solver's tolerance.
 
 A first contact that plain Newton settles at once (the shipped scenes' first levels: 3 iterations) needs no path,
-which would cost it 4 more: plain Newton runs first for FIRST_STEPS = 2 iterations (the solve without contact, then
-the solve on the zone it penetrates). Where the second kept its active set, it solved that set's piece and Newton
-goes on (the step test settles the level at the third); where the zone moved, the path starts from there. Deciding
-after 2 rather than 3 iterations saves the one step Newton would spend shrinking the zone by a point: Hertz line
-contact's level 0 took 10 -> 9 (P1, n = 200) and 11 -> 10 (P2, n = 100) iterations.
+which would cost it 4 more: plain Newton runs first for FIRST_STEPS iterations, and the path starts from where it
+stands only where they did not solve the level.
 
 The stiffness ratio R is :func:`contact_stiffness_ratio` (the largest over Gamma_C's nodes); a stage's s is its ratio
 over R. The path is taken with the linear law only (where it was measured): on Example 1's limited-penetration
@@ -39,7 +36,7 @@ from solver.physics.displacement import DisplacementProblem
 
 # the stages' contact stiffness against K's diagonal (each s = ratio / R < 1: the path is taken where R > STIFF)
 RATIOS = (1.0, 10.0, 100.0)
-FIRST_STEPS = 2  # plain Newton's iterations on a first contact before the path (unless the last kept its active set)
+FIRST_STEPS = 3  # plain Newton's iterations on a first contact before the path is taken (from where they end)
 STAGE_ITERATIONS = 2  # Newton steps of a stage before s grows (its residual need not meet the tolerance)
 STIFF = 10.0 * RATIOS[-1]  # a contact stiffer than this (ratio R) gets the path on a first contact
 

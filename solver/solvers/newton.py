@@ -283,10 +283,9 @@ class NewtonSolver(DisplacementMethod):
                             self.fallback.krylov_iterations)
 
     def _first_contact(self) -> tuple[int, np.ndarray, int]:
-        """A first contact: plain Newton for at most FIRST_STEPS iterations, on to the level's limit where the last
-        of them kept its active set (the shipped scenes' first levels), else the compliance path from where it
-        stands (continuation.py): each stage at most STAGE_ITERATIONS steps from the last, then the level's own
-        problem (s = 1) under the level's test. Returns the last run's
+        """A first contact: plain Newton for at most FIRST_STEPS iterations, and where that does not solve the
+        level, the compliance path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS
+        steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last run's
         reason, the residual history (each run's but its last, the last one's whole) and the iterations of all."""
         core, path = self.core, self.continuation
         test, limit = core.test, core.test.max_it
@@ -298,14 +297,6 @@ class NewtonSolver(DisplacementMethod):
             test.max_it = limit
         if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit:
             return reason, first, its
-        if reason == R.DIVERGED_MAX_IT and not self.problem.contact.active_set_moved():
-            # the last step kept its active set: it solved that set's piece, and Newton settles the level in one more
-            test.max_it = limit - its
-            try:
-                reason, rest, n = core.plain_newton()
-            finally:
-                test.max_it = limit
-            return reason, np.concatenate([first[:its], rest[:n + 1]]), its + n
         history = list(first[:its])
         try:
             for s in path.scales:

@@ -62,18 +62,3 @@ def test_newton_condensed_first_contact_takes_the_path(comm, monkeypatch):
     assert row["newton_iterations"] < plain["newton_iterations"]
     for key in ("contact_force", "contact_length", "strain_norm"):
         assert row[key] == pytest.approx(plain[key], rel=1e-9), key
-
-
-def test_first_contact_that_keeps_its_zone_takes_no_path(comm, monkeypatch):
-    """A flat obstacle: the solve without contact penetrates the whole bottom, the solve held there keeps that
-    zone, so plain Newton settles the level (3 iterations) and the path is not taken."""
-    stages = []
-    monkeypatch.setattr(ComplianceContinuation, "set_scale", lambda self, s: stages.append(s))
-    scene = hertz_line(32)
-    scene["boundary"]["bottom"].update(gap=0.0)
-    for key in ("gap_coordinate", "gap_interpolation"):
-        del scene["boundary"]["bottom"][key]
-    model = build_model(from_dict(scene), comm)
-    assert ComplianceContinuation(model.mech.problem).applies()
-    row = Stepper(model).step(0)
-    assert stages == [] and row["newton_iterations"] == 3 and row["contact_force"] > 0.0
