@@ -27,7 +27,7 @@ keeps each one open (past the usual limit of 1024 descriptors).
 
 **Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
 levels of chunk files that were written completely and will not be written again.
-- *Data.* The chunk being filled is an HDF5 file in memory (h5py's core driver) on rank 0.
+- *Data.* The chunk being filled is the image of an HDF5 file in memory on rank 0.
   It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
   :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
   :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
@@ -45,13 +45,15 @@ The price: after a kill, the levels written since the last chunk was closed are 
 lists every level before the checkpoint is written. Writes are not ``fsync``ed for safety:
 they survive the death of the process, not of the machine.
 
-**Cost.** A level costs one HDF5 group and one dataset per field in memory, the floor of one
-dataset per level and field. The XML is rewritten once per closed chunk, so its cost per level
-is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
-calling thread: h5py holds the GIL, so a writer thread would not run beside the solver.
-(Figures: docs/developer/design-notes.md.) One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
-page cache; both release the GIL), so that the kernel does not write GBs of dirty pages back
-late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
+**Cost.** The groups and datasets of a chunk are made by HDF5 once per series and chunk size
+(:class:`_Template`: contiguous datasets allocated at creation, whose data offsets in the file are then known);
+a level copies its values into the chunk's image at those offsets, with no HDF5 call (a dataset made per level
+and field cost some 50 us, most of the writer's time). The XML is rewritten once per closed chunk, so its cost
+per level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
+calling thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each
+closed chunk (``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the
+kernel does not write GBs of dirty pages back late in a long run, where that slows the memory-bound solves
+(``SETTLE_CHUNKS``).
 
 **Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
 line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
