@@ -45,7 +45,8 @@ PLANE_STRAIN_ONLY = ("stress_zz", "elastic_stress_zz")
 class CellStresses:
     """Cell averages of A eps(u) and of sigma = A eps(u) + M on the owned cells, with nothing assembled per level.
 
-    For P1 displacements eps(u) is constant on each cell: its independent components are one
+    For P1 displacements eps(u) is constant on each cell: its independent components are read
+    from the memory source's kept strain at the cell's first point (:meth:`strain`), or are one
     sparse product B u with B assembled once (rows scaled by 1/|K|; 12 entries per triangle),
     and A eps = lambda tr(eps) I + 2 mu eps follows per cell. The memory M lives at the points
     of the quadrature rule that integrates it everywhere else; on affine cells its L2
@@ -85,11 +86,30 @@ class CellStresses:
             self.q_weights = (rule.weights / rule.weights.sum())[None, :, None]
             if self.plane_strain:  # M_33 is a scalar at the same points
                 self.points_zz = RowMap(self.history.M33.function_space.dofmap.list.array.reshape(n_all, npts)[:n_cells], 1)
+        self._kept = None  # (components, points): where the source's kept strain holds each owned cell's components
+        source = self.history.H if self.history is not None else None
+        if (model.u.function_space.ufl_element().degree() == 1 and hasattr(source, "kept_strain")
+                and getattr(source, "Q", None) is self.history.M.function_space):
+            q = self.history.M.function_space.dofmap.list.array.reshape(n_all, self.npts)[:n_cells, 0]
+            order = [source.pairs.index(p) for p in self.pairs]  # the same components, 3-D off-diagonals reordered
+            self._kept = (np.asarray(order)[:, None], np.asarray(q, dtype=np.intp)[None, :])
+
+    def strain(self) -> np.ndarray:
+        """The independent strain components of u per owned cell, (cells, components) in ``pairs``' order.
+
+        For P1 displacements eps(u) is constant on each cell: when the memory source has kept u's strain at its
+        points (the level's strain norm computed it), it is read from there at each cell's first point, with no
+        product (that product was a third of a written level's time: docs/benchmarks/speed.md); else B u."""
+        if self._kept is not None:
+            eps = self.history.H.kept_strain()
+            if eps is not None:
+                return eps[self._kept[0], self._kept[1]].T
+        self.strain_components.mult(self.u.vector, self.out)
+        return self.cells.take(self.out.array_r)
 
     def elastic(self) -> np.ndarray:
         """A eps(u) per owned cell, rows of d*d (row-major)."""
-        self.strain_components.mult(self.u.vector, self.out)
-        e = self.cells.take(self.out.array_r)
+        e = self.strain()
         d = self.d
         s = np.empty((len(e), d, d))
         trace = e[:, 0] + e[:, 1] if d == 2 else e[:, 0] + e[:, 1] + e[:, 2]  # sum(axis=1) bit for bit, faster

@@ -258,9 +258,10 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 # inject a kill or a full disk (tests/faults.py).
 
 
-def _write_dataset(chunk: _Chunk, slot: int, name: str, data: np.ndarray) -> None:
-    """One field of one level: its values copied into the chunk's image, where its dataset's data lies."""
-    chunk.put(slot, name, data)
+def _write_dataset(chunk: _Chunk, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
+    """One field of one level: ``values[rows]`` (the field in file order) copied into the chunk's image, where its
+    dataset's data lies."""
+    chunk.put(slot, name, values, rows)
 
 
 def _write_file(path: Path, data: bytes) -> None:
@@ -379,15 +380,16 @@ class _Chunk:
     def full(self) -> bool:
         return len(self.grids) >= self.slots
 
-    def put(self, slot: int, name: str, data: np.ndarray) -> None:
-        """A field's values (in file order) at a slot."""
-        self.template(self.slots).values(self.full_image, slot, name)[:] = data.ravel()
+    def put(self, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
+        """A field at a slot: ``values[rows]``, taken straight into the image (one copy)."""
+        np.take(values, rows, out=self.template(self.slots).values(self.full_image, slot, name), mode="clip")
 
-    def add(self, t: float, fields: list[tuple[str, np.ndarray]], grid_format: str) -> None:
-        """Write one level's fields into group ``NNNN``; its grid is kept once every field is written."""
+    def add(self, t: float, values: np.ndarray, rows: Mapping[str, np.ndarray], grid_format: str) -> None:
+        """Write one level into group ``NNNN``: each field ``values[rows[field]]``; its grid is kept once every field
+        is written."""
         slot = len(self.grids)
-        for name, data in fields:
-            _write_dataset(self, slot, name, data)
+        for name, index in rows.items():
+            _write_dataset(self, slot, name, values, index)
         self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=f"{slot:04d}"))
         self.times.append(t)
 
@@ -601,7 +603,7 @@ class XDMFSeries:
             comm.Gatherv(np.ascontiguousarray(buf), (recv, self.send_counts) if comm.rank == 0 else None, root=0)
         else:
             recv = buf
-        self._collective(lambda: self._write_level(float(t), list(self._global(recv))))
+        self._collective(lambda: self._write_level(float(t), recv))
 
     def flush(self) -> None:
         """List every level written so far: close the open chunk and replace the XML (collective).
@@ -614,8 +616,8 @@ class XDMFSeries:
         if not self.closed:
             self._collective(flush)
 
-    def _global(self, recv: np.ndarray):
-        """Rank 0: each field's values in file order (one gather through an index computed once)."""
+    def _rows(self) -> dict[str, np.ndarray]:
+        """Rank 0: per field, where its values in file order are in the gathered buffer (computed once)."""
         if self._take is None:
             self._take = {}
             pos = 0
@@ -625,11 +627,9 @@ class XDMFSeries:
                     take = self._take.setdefault(f.name, np.empty(self.layout.counts[f.center] * f.ncomp, np.int64))
                     take.reshape(-1, f.ncomp)[r] = pos + np.arange(len(r) * f.ncomp).reshape(-1, f.ncomp)
                     pos += len(r) * f.ncomp
-        for f in self.fields:
-            values = recv[self._take[f.name]]
-            yield f.name, (values if f.ncomp == 1 else values.reshape(-1, f.ncomp))
+        return self._take
 
-    def _write_level(self, t: float, fields: list[tuple[str, np.ndarray]]) -> None:
+    def _write_level(self, t: float, recv: np.ndarray) -> None:
         """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
         self._raise_error()
         try:
@@ -637,7 +637,7 @@ class XDMFSeries:
                 first = len(self.grids)
                 self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, self._chunk_slots(),
                                     self._template)
-            self.chunk.add(t, fields, self._grid_format)
+            self.chunk.add(t, recv, self._rows(), self._grid_format)
         except Exception as exc:
             try:
                 self._list_open_chunk()  # its complete levels, if they can still be written

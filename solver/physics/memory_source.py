@@ -216,6 +216,15 @@ class MemorySource:
             del self._cache[self.keep:]
         return eps
 
+    def kept_strain(self) -> np.ndarray | None:
+        """The strain of the field's current values as :meth:`strain` gives it if it is kept, else None (no product
+        is made): what a reader that can also compute it otherwise (the written cell stresses) asks first."""
+        u = self.u.x.array
+        for values, eps in self._cache:
+            if _equal(values, u):
+                return eps
+        return None
+
     def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
         """out = base + scale * H at the points for the current u and zeta (base None: scale * H), in the
         quadrature space's layout (base may be out)."""
