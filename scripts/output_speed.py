@@ -2,8 +2,10 @@
 ``output.every = 1`` against ``output.every = 0`` (no fields, no contact profile), in this tree and optionally in
 another (``--base``), alternated: (base every=1, base every=0, this every=1, this every=0) for ``--rounds`` rounds.
 
-Reports, per tree, the median and range of the ratio every=1 / every=0 of the same round, and the medians of the
-time loop's output time (the time series' ``time_output``). Writes ``NAME.json`` and ``NAME.md`` to ``--output``.
+Reports, per tree, the median and range of the ratio every=1 / every=0 of the same round, in wall time and in CPU
+time (user + system of the child process: steadier than wall time on a loaded machine, where waiting for a core
+counts in the wall time), and the medians of the time loop's output time (the time series' ``time_output``).
+Writes ``NAME.json`` and ``NAME.md`` to ``--output``.
 
     python scripts/output_speed.py --base /work/main --rounds 5
 """
@@ -14,6 +16,7 @@ import argparse
 import csv
 import json
 import os
+import resource
 import shlex
 import statistics
 import subprocess
@@ -25,16 +28,22 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _once(src: Path, every: int, sets: list[str], out: Path) -> tuple[float, float]:
-    """(whole command, output time in the loop) seconds of one run of ``src``'s CLI."""
+def _cpu() -> float:
+    """User + system seconds of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _once(src: Path, every: int, sets: list[str], out: Path) -> tuple[float, float, float]:
+    """(whole command, output time in the loop, the command's CPU time) seconds of one run of ``src``'s CLI."""
     cmd = [sys.executable, "-m", "solver", "run", str(src / "configs" / "example1.toml"), "--output", str(out),
            "--overwrite", "--no-progress", "--set", f"output.every={every}", *(a for s in sets for a in ("--set", s))]
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu()
     subprocess.run(cmd, env={**os.environ, "PYTHONPATH": str(src)}, cwd=src, check=True, capture_output=True)
-    whole = time.perf_counter() - t0
+    whole, cpu = time.perf_counter() - t0, _cpu() - c0
     with (out / "timeseries.csv").open() as f:
         output = sum(float(r["time_output"]) for r in csv.DictReader(f))
-    return whole, output
+    return whole, output, cpu
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -57,11 +66,15 @@ def main(argv: list[str] | None = None) -> int:
                 for every in (1, 0):
                     runs[name][every].append(_once(src, every, sets, Path(tmp) / f"{name}{every}"))
             print(f"round {r + 1}: " + ", ".join(
-                f"{name} {runs[name][1][-1][0] / runs[name][0][-1][0]:.3f}" for name in trees), flush=True)
+                f"{name} {runs[name][1][-1][0] / runs[name][0][-1][0]:.3f} (cpu "
+                f"{runs[name][1][-1][2] / runs[name][0][-1][2]:.3f})" for name in trees), flush=True)
     rows = {}
     for name in trees:
         pairs = [a[0] / b[0] for a, b in zip(runs[name][1], runs[name][0], strict=True)]
+        cpu = [a[2] / b[2] for a, b in zip(runs[name][1], runs[name][0], strict=True)]
         rows[name] = {"ratio_median": statistics.median(pairs), "ratio_min": min(pairs), "ratio_max": max(pairs),
+                      "cpu_ratio_median": statistics.median(cpu), "cpu_ratio_min": min(cpu), "cpu_ratio_max": max(cpu),
+                      "load_average": os.getloadavg(),
                       "every1_median_s": statistics.median(a[0] for a in runs[name][1]),
                       "every0_median_s": statistics.median(a[0] for a in runs[name][0]),
                       "output_median_s": statistics.median(a[1] for a in runs[name][1]), "runs": runs[name]}
@@ -71,12 +84,15 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f"# Writing every level: Example 1, n = {args.n}, k = {args.k} ({round(1 / args.k) + 1} levels)", "",
              "`python scripts/output_speed.py " + shlex.join(argv if argv is not None else sys.argv[1:]) + "`", "",
              f"{args.rounds} alternated rounds; the ratio is each round's whole `solver run` with `output.every = 1` "
-             "over the same tree's run with `output.every = 0`.", "",
-             "| tree | every=1 / every=0 (min–max) | every=1, every=0 medians (s) | output time in the loop (s) |",
-             "|---|---|---|---|"]
+             "over the same tree's run with `output.every = 0`, in wall time and in CPU time (user + system of the "
+             f"command). Load average at the end: {' '.join(f'{x:.1f}' for x in os.getloadavg())} (2 cores).", "",
+             "| tree | every=1 / every=0, wall (min–max) | CPU (min–max) | every=1, every=0 wall medians (s) | "
+             "output time in the loop (s) |",
+             "|---|---|---|---|---|"]
     for name, row in rows.items():
         label = f"{name} ({trees[name]})"
         lines.append(f"| {label} | {row['ratio_median']:.3f} ({row['ratio_min']:.2f}–{row['ratio_max']:.2f}) | "
+                     f"{row['cpu_ratio_median']:.3f} ({row['cpu_ratio_min']:.2f}–{row['cpu_ratio_max']:.2f}) | "
                      f"{row['every1_median_s']:.2f}, {row['every0_median_s']:.2f} | {row['output_median_s']:.2f} |")
     (args.output / f"{args.name}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines[-len(rows):]))

@@ -22,6 +22,8 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -43,21 +45,32 @@ def _export(rev: str, into: Path) -> Path:
     return into
 
 
+ENV = dict(os.environ)  # the children's environment (--bytecode: with Python's bytecode cache, as a user has it)
+
+
+def _cpu() -> float:
+    """User + system seconds of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def _run(tree: Path, out: Path, scene: str, overrides: list[str]) -> dict[str, float]:
-    """One CLI run from ``tree``; its wall time, level 0's and the steps' (from the CSV)."""
+    """One CLI run from ``tree``; its wall time and CPU time (user + system), level 0's and the steps' wall time
+    (from the CSV)."""
     cmd = [sys.executable, "-m", "solver", "run", scene, *(a for o in overrides for a in ("--set", o)),
            "--no-progress", "--output", str(out)]
-    t0 = time.perf_counter()
-    subprocess.run(cmd, cwd=tree, check=True, capture_output=True)
-    total = time.perf_counter() - t0
+    t0, c0 = time.perf_counter(), _cpu()
+    subprocess.run(cmd, cwd=tree, check=True, capture_output=True, env=ENV)
+    total, cpu = time.perf_counter() - t0, _cpu() - c0
     rows = list(csv.DictReader(open(out / "timeseries.csv")))
     steps = sum(float(r["wall_time"]) for r in rows[1:])
-    return {"total": total, "level0": float(rows[0]["wall_time"]), "steps": steps, "startup_end": total - steps}
+    return {"total": total, "cpu": cpu, "level0": float(rows[0]["wall_time"]), "steps": steps,
+            "startup_end": total - steps}
 
 
 def _imports(tree: Path) -> float:
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", IMPORTS], cwd=tree, check=True, capture_output=True)
+    subprocess.run([sys.executable, "-c", IMPORTS], cwd=tree, check=True, capture_output=True, env=ENV)
     return time.perf_counter() - t0
 
 
@@ -178,8 +191,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--name", default="startup", help="result files NAME.json and NAME.md")
     p.add_argument("--pieces", action="store_true", help=argparse.SUPPRESS)  # the child process of pieces()
     p.add_argument("--build-only", action="store_true", help="time only build_model (and its peak memory)")
+    p.add_argument("--bytecode", action="store_true",
+                   help="let the children use and write Python's bytecode cache (__pycache__) even where "
+                        "PYTHONDONTWRITEBYTECODE is set (each tree is then run once before the timed runs)")
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = p.parse_args(argv)
+    if args.bytecode:
+        ENV.pop("PYTHONDONTWRITEBYTECODE", None)
     args.overrides = args.overrides or ["mesh.nx=128", "mesh.ny=128", "time.k=0.005"]
     if args.pieces:
         print(json.dumps(pieces(args.scene, args.overrides, args.repeats)))
@@ -195,6 +213,9 @@ def main(argv: list[str] | None = None) -> int:
         trees = {"before": _export(args.before, Path(tempfile.mkdtemp(dir=tmp))), "after": ROOT}
         runs: dict[str, list[dict]] = {"before": [], "after": []}
         imports: dict[str, list[float]] = {"before": [], "after": []}
+        if args.bytecode:  # the caches written before the timed runs
+            for name, tree in trees.items():
+                _run(tree, tmp / f"{name}-warm", args.scene, args.overrides)
         for i in range(args.repeats):
             for name, tree in trees.items():
                 runs[name].append(_run(tree, tmp / f"{name}{i}", args.scene, args.overrides))
@@ -208,7 +229,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in med:
         med[name]["imports"] = statistics.median(imports[name])
     result = {"before": before_rev, "after": after_rev, "scene": args.scene, "overrides": args.overrides,
-              "repeats": args.repeats,
+              "repeats": args.repeats, "bytecode": args.bytecode, "dontwrite": ENV.get("PYTHONDONTWRITEBYTECODE"),
+              "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "name": args.name,
               "median": med, "runs": runs, "imports": imports, "differ": differ, "pieces": parts,
               "ratio": {key: med["after"][key] / med["before"][key] for key in med["after"]},
               "pair_ratio": {key: statistics.median(a[key] / b[key] for a, b in zip(runs["after"], runs["before"]))
@@ -223,14 +245,19 @@ def main(argv: list[str] | None = None) -> int:
 
 def _table(r: dict) -> str:
     b, a = r["median"]["before"], r["median"]["after"]
-    rows = [("whole run", "total"), ("start-up and end (whole less the steps)", "startup_end"),
+    rows = [("whole run", "total"), ("whole run, CPU time (user + system)", "cpu"),
+            ("start-up and end (whole less the steps)", "startup_end"),
             ("  of which level 0 (its factorizations)", "level0"), ("steps 1..N", "steps"),
             ("imports only (`python -c '" + IMPORTS + "'`)", "imports")]
     sets = " ".join(f"--set {o}" for o in r["overrides"])
+    cache = ("used and written (--bytecode: as a user has it)" if r.get("bytecode") else
+             f"as the environment says (PYTHONDONTWRITEBYTECODE={r.get('dontwrite')})")
     lines = [f"# Start-up of the CLI run of {r['scene']} {sets} (one rank)", "",
-             f"`python scripts/startup.py --before {r['before']} --scene {r['scene']} {sets}`: "
+             f"`python scripts/startup.py --before {r['before']} --scene {r['scene']} {sets}"
+             f"{' --bytecode' if r.get('bytecode') else ''} --name {r.get('name', 'startup')}`: "
              f"before = {r['before']}, after = {r['after']}; "
-             f"{r['repeats']} runs of each, alternated, each a new process; medians in seconds.", "",
+             f"{r['repeats']} runs of each, alternated, each a new process; medians in seconds. Python's bytecode "
+             f"cache: {cache}; load average at the end {r.get('load', '?')} (2 cores).", "",
              "| | before | after | after / before (medians) | median of the pairs' ratios |", "|---|---|---|---|---|"]
     lines += [f"| {label} | {b[key]:.3f} | {a[key]:.3f} | {a[key] / b[key]:.3f} | {r['pair_ratio'][key]:.3f} |"
               for label, key in rows]

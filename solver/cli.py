@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import NoReturn
 
 from mpi4py import MPI
-from tqdm import tqdm
 
 from solver import __version__
 from solver.config import load
@@ -108,6 +107,8 @@ def _progress(comm: MPI.Comm, steps: int, enabled: bool, T: float | None = None)
         return None, lambda row: None
     if not sys.stderr.isatty():
         return None, _log_lines(steps) if T is None else _log_time(T)
+    from tqdm import tqdm  # only for a terminal's bar
+
     if T is not None:
         bar = tqdm(total=T, unit="s", dynamic_ncols=True, file=sys.stderr, mininterval=0.2,
                    bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}{postfix}]")

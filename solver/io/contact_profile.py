@@ -11,11 +11,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
 from solver.io.files import on_rank0, write_text_atomic
 from solver.io.layout import PROFILE_COLUMNS
 from solver.physics.contact_traces import ContactTraces
+
+HEAD = 4  # the columns that are the same at every level: s and the point (x, y, z)
 
 
 class ProfileWriter:
@@ -24,6 +27,7 @@ class ProfileWriter:
     def __init__(self, path: Path, comm: MPI.Comm, traces: ContactTraces, keep_step: int | None = None) -> None:
         self.path, self.comm, self.traces = path, comm, traces
         self.fd: int | None = None  # rank 0: the file, open for appending while the run lasts
+        self._templates: dict[str, tuple[bytes, str]] = {}  # rank 0: per part, its lines' format (_template)
 
         def start() -> None:
             kept = []
@@ -41,9 +45,9 @@ class ProfileWriter:
         parts = self.traces.profile()  # collective
 
         def append() -> None:
-            lead = f"{step},{float(t)!r},"
-            data = "".join(lead + name + "," + ",".join(map(repr, row)) + "\n"
-                           for name, rows in parts for row in rows.tolist()).encode()
+            lead = f"{step},{float(t)!r},".replace("%", "%%")
+            data = "".join(self._template(name, rows).replace("\0", lead) % tuple(rows[:, HEAD:].ravel().tolist())
+                           for name, rows in parts).encode()
             try:
                 if os.write(self.fd, data) != len(data):
                     raise OSError(28, "No space left on device (short write)", str(self.path))
@@ -53,6 +57,19 @@ class ProfileWriter:
             self.size += len(data)
 
         on_rank0(self.comm, append)
+
+    def _template(self, name: str, rows: np.ndarray) -> str:
+        """A part's lines with its fixed columns (s and the point) written out, \\0 for the lead (step, t) and %r
+        for each of the others: a level is one % format, the same text as repr of each value (its fixed columns'
+        reprs made once). Made again if the fixed columns change."""
+        head = np.ascontiguousarray(rows[:, :HEAD])
+        kept = self._templates.get(name)
+        if kept is None or kept[0] != head.tobytes():
+            tail = ",%r" * (rows.shape[1] - HEAD) + "\n"
+            text = "".join("\0" + (name + "," + ",".join(map(repr, row))).replace("%", "%%") + tail
+                           for row in head.tolist())
+            kept = self._templates[name] = (head.tobytes(), text)
+        return kept[1]
 
     def close(self) -> None:
         if self.fd is not None:

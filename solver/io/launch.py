@@ -15,6 +15,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 from dolfinx.io import XDMFFile
@@ -26,9 +27,10 @@ from solver.io.checkpoint import scene_hash
 from solver.io.files import on_rank0, write_text_atomic
 from solver.io.layout import CLI, ResultsDir, Wording, prepare
 from solver.run import formcache
-from solver.run.accuracy import ErrorSensor, Plan, contradicting
-from solver.run.accuracy import plan as make_plan
 from solver.run.model import Model, build_model
+
+if TYPE_CHECKING:  # the planner is imported only by a run with a tolerance (start-up: docs/benchmarks/speed.md)
+    from solver.run.accuracy import Plan
 
 log = logging.getLogger("solver")
 
@@ -78,6 +80,9 @@ def _planned(cfg: Config, comm: MPI.Comm, outdir: Path | None, overwrite: bool, 
              overrides: list[str] | tuple[str, ...], wording: Wording, info: Callable[..., None]) -> Launched:
     """Plan the scene for its tolerance, then prepare the directory, build the planned model and its error sensor,
     and write plan.json and mesh.xdmf."""
+    from solver.run.accuracy import ErrorSensor, contradicting
+    from solver.run.accuracy import plan as make_plan
+
     clash = contradicting(list(overrides))
     if clash:
         raise UsageError(f"--set {clash[0]}: contradicts the tolerance (with accuracy.tolerance the solver chooses "

@@ -27,7 +27,7 @@ keeps each one open (past the usual limit of 1024 descriptors).
 
 **Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
 levels of chunk files that were written completely and will not be written again.
-- *Data.* The chunk being filled is an HDF5 file in memory (h5py's core driver) on rank 0.
+- *Data.* The chunk being filled is the image of an HDF5 file in memory on rank 0.
   It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
   :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
   :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
@@ -45,13 +45,15 @@ The price: after a kill, the levels written since the last chunk was closed are 
 lists every level before the checkpoint is written. Writes are not ``fsync``ed for safety:
 they survive the death of the process, not of the machine.
 
-**Cost.** A level costs one HDF5 group and one dataset per field in memory, the floor of one
-dataset per level and field. The XML is rewritten once per closed chunk, so its cost per level
-is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
-calling thread: h5py holds the GIL, so a writer thread would not run beside the solver.
-(Figures: docs/developer/design-notes.md.) One thread settles each closed chunk (``fdatasync``, then its pages dropped from the
-page cache; both release the GIL), so that the kernel does not write GBs of dirty pages back
-late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
+**Cost.** The groups and datasets of a chunk are made by HDF5 once per series and chunk size
+(:class:`_Template`: contiguous datasets allocated at creation, whose data offsets in the file are then known);
+a level copies its values into the chunk's image at those offsets, with no HDF5 call (a dataset made per level
+and field cost some 50 us, most of the writer's time). The XML is rewritten once per closed chunk, so its cost
+per level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
+calling thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each
+closed chunk (``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the
+kernel does not write GBs of dirty pages back late in a long run, where that slows the memory-bound solves
+(``SETTLE_CHUNKS``).
 
 **Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
 line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
@@ -69,7 +71,7 @@ import queue
 import re
 import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -257,12 +259,10 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 # inject a kill or a full disk (tests/faults.py).
 
 
-def _write_dataset(group, name: str, data: np.ndarray, tid, dcpl) -> None:
-    """One field of one level: a new dataset in ``group`` (h5py's low-level calls cost half of
-    ``Group.create_dataset``'s)."""
-    space = h5py.h5s.create_simple(data.shape)
-    ds = h5py.h5d.create(group, name.encode(), tid, space, dcpl=dcpl)
-    ds.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
+def _write_dataset(chunk: _Chunk, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
+    """One field of one level: ``values[rows]`` (the field in file order) copied into the chunk's image, where its
+    dataset's data lies."""
+    chunk.put(slot, name, values, rows)
 
 
 def _write_file(path: Path, data: bytes) -> None:
@@ -275,11 +275,9 @@ def _write_file(path: Path, data: bytes) -> None:
 
 
 def _close_chunk(chunk: _Chunk) -> None:
-    """Close a chunk's in-memory HDF5 file and write its image to the chunk's path, complete."""
-    chunk.h5.flush()
-    image = chunk.h5.id.get_file_image()
-    chunk.h5.close()
-    _write_file(chunk.path, image)
+    """Write a chunk's image, complete, to its path."""
+    _write_file(chunk.path, chunk.image())
+    chunk.recycle()
 
 
 def _remove(path: Path) -> None:
@@ -299,36 +297,123 @@ def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
         raise
 
 
+ABOUT = "solver.xdmf chunk: group NNNN holds level FIRST + NNNN of the series (FIRST: the number in the file name)"
+
+
+class _Template:
+    """The HDF5 file of a chunk of ``slots`` levels, made once: its bytes other than the datasets' data, and where
+    each dataset's data lies (contiguous, allocated at creation).
+
+    Every chunk of a series has the same groups and datasets, so a chunk is this file with its levels' values
+    copied in at those offsets (a memcpy per field) instead of an HDF5 group and datasets made per level: the
+    HDF5 calls (some 50 us per dataset) are paid once per series and chunk size, not per level and field."""
+
+    def __init__(self, fields: Sequence[FieldSpec], counts: Mapping[str, int], dtype: np.dtype, slots: int) -> None:
+        h5 = h5py.File(f"template-{slots}", "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
+        try:
+            h5.attrs["about"] = ABOUT
+            dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+            dcpl.set_obj_track_times(False)  # the same bytes from the same values
+            dcpl.set_layout(h5py.h5d.CONTIGUOUS)
+            dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the data's place known before it is written
+            dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every value is written
+            tid = h5py.h5t.py_create(dtype)
+            self.where: list[dict[str, tuple[int, int]]] = []  # per slot: field -> (offset, values)
+            for slot in range(slots):
+                group = h5py.h5g.create(h5.id, f"{slot:04d}".encode())
+                where = {}
+                for f in fields:
+                    n = counts[f.center]
+                    shape = (n,) if f.ncomp == 1 else (n, f.ncomp)
+                    ds = h5py.h5d.create(group, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
+                    where[f.name] = (ds.get_offset() or 0, n * f.ncomp)  # no offset: no values (0 rows)
+                self.where.append(where)
+            h5.flush()
+            image = h5.id.get_file_image()
+        finally:
+            h5.close()
+        self.dtype, self.size = dtype, len(image)
+        head, at = [], 0  # the metadata (HDF5's own bytes): what lies between the datasets' values
+        for offset, count in sorted(v for where in self.where for v in where.values() if v[1]):
+            if offset > at:
+                head.append((at, image[at:offset]))
+            at = max(at, offset + count * dtype.itemsize)
+        self.head = head + ([(at, image[at:])] if at < len(image) else [])
+        self.spare: bytearray | None = None
+
+    def recycle(self, image: bytearray) -> None:
+        """Take back an image once its file is written: the next chunk's, its values all written again (no new
+        memory to allocate and fault in per chunk)."""
+        self.spare = image
+
+    def image(self) -> bytearray:
+        """An image of the file: its metadata, and zeros (or the values of a written chunk: :meth:`recycle`) where
+        the values go."""
+        if self.spare is not None:
+            out, self.spare = self.spare, None
+            return out
+        out = bytearray(self.size)
+        for offset, part in self.head:
+            out[offset: offset + len(part)] = part
+        return out
+
+    def values(self, image: bytearray, slot: int, name: str) -> np.ndarray:
+        """The values of a field at a slot, a view into ``image``."""
+        offset, count = self.where[slot][name]
+        return np.frombuffer(image, dtype=self.dtype, count=count, offset=offset) if count else np.zeros(0, self.dtype)
+
+
 class _Chunk:
-    """A chunk being filled (rank 0): an HDF5 file in memory (h5py's core driver), written to ``path`` when closed.
+    """A chunk being filled (rank 0): the image of its HDF5 file in memory, written to ``path`` when closed.
 
     Kept in memory, an open chunk never leaves a half-written HDF5 file behind it: a full disk fails the one
-    plain write of its image, which leaves HDF5 in no failed state (an HDF5 file on disk whose writes failed
-    cannot be closed, and made the process crash at exit). It costs up to ``CHUNK_BYTES`` of memory on rank 0.
+    plain write of its image. It costs up to ``CHUNK_BYTES`` of memory on rank 0. ``template(n)`` gives the
+    :class:`_Template` of n slots: a chunk closed before it is full is written as the file of its levels only.
     """
 
-    def __init__(self, path: Path, first: int, slots: int, dtype: np.dtype) -> None:
-        self.path, self.first, self.slots = path, first, slots
+    def __init__(self, path: Path, first: int, slots: int, template) -> None:
+        self.path, self.first, self.slots, self.template = path, first, slots, template
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
-        self.h5 = h5py.File(str(path), "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
-        self.h5.attrs["about"] = f"solver.xdmf chunk: group NNNN holds level {first} + NNNN of the series"
-        self.dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-        self.dcpl.set_obj_track_times(False)  # the same bytes from the same values
-        self.tid = h5py.h5t.py_create(dtype)
+        self.full_image = template(slots).image()
 
     @property
     def full(self) -> bool:
         return len(self.grids) >= self.slots
 
-    def add(self, t: float, fields: list[tuple[str, np.ndarray]], grid_format: str) -> None:
-        """Write one level's fields into group ``NNNN``; its grid is kept once every field is written."""
-        slot = f"{len(self.grids):04d}"
-        group = h5py.h5g.create(self.h5.id, slot.encode())
-        for name, data in fields:
-            _write_dataset(group, name, data, self.tid, self.dcpl)
-        self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=slot))
+    def put(self, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
+        """A field at a slot: ``values[rows]``, taken straight into the image (one copy)."""
+        np.take(values, rows, out=self.template(self.slots).values(self.full_image, slot, name), mode="clip")
+
+    def add(self, t: float, values: np.ndarray | list[np.ndarray], rows: Mapping[str, np.ndarray], grid_format: str) -> None:
+        """Write one level into group ``NNNN``: each field ``values[rows[field]]`` (``values`` a list: the fields' own
+        arrays, in the order of ``rows``); its grid is kept once every field is written."""
+        slot = len(self.grids)
+        for i, (name, index) in enumerate(rows.items()):
+            _write_dataset(self, slot, name, values[i] if isinstance(values, list) else values, index)
+        self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=f"{slot:04d}"))
         self.times.append(t)
+
+    def image(self) -> bytearray:
+        """The file of the complete levels (all slots: the image filled; fewer: their values in a smaller file)."""
+        n = len(self.grids)
+        if n == self.slots:
+            return self.full_image
+        full, part = self.template(self.slots), self.template(n)
+        out = part.image()
+        for slot in range(n):
+            for name in part.where[slot]:
+                part.values(out, slot, name)[:] = full.values(self.full_image, slot, name)
+        return out
+
+    def recycle(self) -> None:
+        """Give the image back to the template (the file written)."""
+        self.template(self.slots).recycle(self.full_image)
+        self.drop()
+
+    def drop(self) -> None:
+        """Forget the image (a failed or killed chunk)."""
+        self.full_image = bytearray()
 
 
 class _Settler:
@@ -397,6 +482,7 @@ class XDMFSeries:
         self.closed = False
         self._take: dict[str, np.ndarray] | None = None
         self._settler: _Settler | None = None
+        self._templates: dict[int, _Template] = {}  # rank 0: the chunk files' templates, by levels
         self._setup_gather()
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
@@ -520,11 +606,9 @@ class XDMFSeries:
             recv = np.empty(sum(self.send_counts), dtype=self.dtype) if comm.rank == 0 else None
             comm.Gatherv(np.ascontiguousarray(buf), (recv, self.send_counts) if comm.rank == 0 else None, root=0)
             del buf
-            recv = [recv]
         else:  # one process: each field's own rows, no level buffer
             recv = parts
-        # a generator: each field is put in file order as it is written, one at a time
-        self._collective(lambda: self._write_level(float(t), self._global(recv)))
+        self._collective(lambda: self._write_level(float(t), recv))
 
     def flush(self) -> None:
         """List every level written so far: close the open chunk and replace the XML (collective).
@@ -537,36 +621,31 @@ class XDMFSeries:
         if not self.closed:
             self._collective(flush)
 
-    def _global(self, recv: list[np.ndarray]):
-        """Rank 0: each field's values in file order (one gather through an index computed once), one field at a
-        time; ``recv``: the gathered level (several ranks), or each field's rows (one process)."""
+    def _rows(self) -> dict[str, np.ndarray]:
+        """Rank 0: per field, where its values in file order are (computed once): in the gathered buffer (several
+        ranks), or in the field's own array (one process: no level buffer)."""
         if self._take is None:
             self._take = {}
             pos = 0
             for rows in self.rows_of:
                 for f in self.fields:
+                    if self.comm.size == 1:
+                        pos = 0
                     r = rows[f.center]
                     take = self._take.setdefault(f.name, np.empty(self.layout.counts[f.center] * f.ncomp, np.int64))
                     take.reshape(-1, f.ncomp)[r] = pos + np.arange(len(r) * f.ncomp).reshape(-1, f.ncomp)
                     pos += len(r) * f.ncomp
-        start = 0
-        for i, f in enumerate(self.fields):
-            if len(recv) == 1:
-                values = recv[0][self._take[f.name]]
-            else:  # the field's own array: its index less the field's place in the level
-                values = recv[i][self._take[f.name] - start]
-                start += len(recv[i])
-            yield f.name, (values if f.ncomp == 1 else values.reshape(-1, f.ncomp))
+        return self._take
 
-    def _write_level(self, t: float, fields: Iterable[tuple[str, np.ndarray]]) -> None:
+    def _write_level(self, t: float, recv: np.ndarray | list[np.ndarray]) -> None:
         """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
         self._raise_error()
         try:
             if self.chunk is None:
                 first = len(self.grids)
                 self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, self._chunk_slots(),
-                                    self.dtype)
-            self.chunk.add(t, fields, self._grid_format)
+                                    self._template)
+            self.chunk.add(t, recv, self._rows(), self._grid_format)
         except Exception as exc:
             try:
                 self._list_open_chunk()  # its complete levels, if they can still be written
@@ -586,6 +665,12 @@ class XDMFSeries:
         if self._settler is not None and self._settler.error is not None:
             raise SeriesError(self._describe(self._settler.error))
 
+    def _template(self, slots: int) -> _Template:
+        """The :class:`_Template` of a chunk of ``slots`` levels (made once)."""
+        if slots not in self._templates:
+            self._templates[slots] = _Template(self.fields, self.layout.counts, self.dtype, slots)
+        return self._templates[slots]
+
     def _chunk_slots(self) -> int:
         """Levels per chunk: ``MAX_LEVELS_PER_CHUNK``, fewer if they would exceed ``CHUNK_BYTES``."""
         level_bytes = sum(self.layout.counts[f.center] * f.ncomp * self.dtype.itemsize for f in self.fields)
@@ -599,7 +684,7 @@ class XDMFSeries:
         if chunk is None:
             return
         if not chunk.grids:  # its first level failed: nothing to write
-            chunk.h5.close()
+            chunk.drop()
             return
         try:
             _close_chunk(chunk)
@@ -671,6 +756,7 @@ class XDMFSeries:
                 if self.error is None:  # after a failed write, the open chunk was listed (or dropped) then
                     self._list_open_chunk()
             finally:
+                self._templates.clear()
                 if self._settler is not None:
                     self._settler.stop()
             self._raise_settled()

@@ -143,7 +143,7 @@ class ContactTraces:
             self._order = self._profile_order() or {}  # {} on the other ranks: found (a collective call, once)
         local = {name: np.column_stack([self.gap.x.array[d], self.normal_displacement.x.array[d],
                                         self.penetration.x.array[d], a[d]]) for name, d in self.part_dofs.items()}
-        gathered = self.comm.gather(local, root=0)
+        gathered = self.comm.gather(local, root=0) if self.comm.size > 1 else [local]  # no pickling alone
         if self.comm.rank != 0:
             return None
         out = []

@@ -242,7 +242,7 @@ def _crash(w: XDMFSeries) -> None:
     if w._settler is not None:
         w._settler.stop()
     if w.chunk is not None:
-        w.chunk.h5.close()  # in memory: lost, as in a killed process
+        w.chunk.drop()  # in memory: lost, as in a killed process
     w.closed = True
 
 
