@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -67,6 +67,8 @@ class Plan:
     adaptation: tuple[MeshRecord, ...]
     seconds: float  # planning time
     scene: Config  # the scene planned for
+    stages: dict = field(default_factory=dict)  # seconds per stage of the planning
+    calibration: object = None  # the estimator constant's calibration on the scene (calibration.Calibration), or None
 
     @property
     def changes(self) -> dict:
@@ -89,4 +91,6 @@ class Plan:
         return {"tolerance": self.tolerance, "u_degree": self.degree, "zeta_degree": self.degree, "order": self.order,
                 "k": self.k, "cells": self.geo.num_cells(), "estimate": self.estimate.as_dict(), "C": self.C,
                 "growth": self.growth, "time_rate": self.time_rate,
-                "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds}
+                "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds,
+                "planning_stages": self.stages,
+                "calibration": None if self.calibration is None else self.calibration.summary()}

@@ -12,6 +12,7 @@ from mpi4py import MPI
 from solver.config import Config
 from solver.errors import SolveFailure
 from solver.mesh.geometry import Geometry
+from solver.mesh.transfer import interpolation_matrix
 from solver.physics.estimator import estimator_for
 from solver.run.model import Model, build_model
 from solver.run.stepper import Stepper, levels
@@ -39,9 +40,30 @@ def displacement_dofs(model: Model) -> int:
     return dofmap.index_map.size_global * dofmap.index_map_bs
 
 
-def solve_level0(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
-    """The t = 0 problem of ``cfg`` on ``geo`` (without memory and damage, which level 0 does not touch)."""
+def warm_start(model: Model, guess: Model | None) -> None:
+    """Newton's start for ``model``'s level 0: ``guess``'s displacement (a solve on a coarser mesh that ``model``'s
+    mesh refines, same degree: exact by interpolation) instead of zero. From zero, a stiff first contact takes
+    plain Newton's steps and the compliance path; from the coarser solution it is in contact already and takes a few
+    steps. 2-D only (the transfer's point location); elsewhere it starts from zero."""
+    if guess is None or model.geo.dim != 2 or guess.u.function_space.ufl_element() != model.u.function_space.ufl_element():
+        return
+    V = model.u.function_space
+    bs = V.dofmap.index_map_bs
+    owned = V.dofmap.index_map.size_local
+    try:
+        P = interpolation_matrix(guess.u.function_space, V.tabulate_dof_coordinates()[:owned, :2])
+    except ValueError:  # a point off this process's part of the coarser mesh: this process starts from zero
+        return
+    coarse = guess.u.x.array.reshape(-1, bs)
+    model.u.x.array[:owned * bs] = (P @ coarse).ravel()
+    model.u.x.scatter_forward()
+
+
+def solve_level0(cfg: Config, comm: MPI.Comm, geo: Geometry, guess: Model | None = None) -> LevelSolve:
+    """The t = 0 problem of ``cfg`` on ``geo`` (without memory and damage, which level 0 does not touch); Newton
+    starts from ``guess``'s solution where given (:func:`warm_start`)."""
     model = build_model(elastic(cfg), comm, geo)
+    warm_start(model, guess)
     row = Stepper(model).step(0)
     est = estimator_for(model)
     cells = est.cells()
@@ -103,7 +125,7 @@ class SpaceProbe(Protocol):
     @property
     def factor(self) -> float: ...
 
-    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve: ...
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry, guess: Model | None = None) -> LevelSolve: ...
 
 
 class AtLevel0:
@@ -111,13 +133,16 @@ class AtLevel0:
 
     def __init__(self, scene: Config, growth: float) -> None:
         self.scene, self.growth = scene, growth
+        self._at: dict[int, Config] = {}  # the scene per degree, validated once
 
     @property
     def factor(self) -> float:
         return max(self.growth, 1.0)
 
-    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
-        return solve_level0(with_changes(self.scene, degrees(degree)), comm, geo)
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry, guess: Model | None = None) -> LevelSolve:
+        if degree not in self._at:
+            self._at[degree] = elastic(with_changes(self.scene, degrees(degree)))
+        return solve_level0(self._at[degree], comm, geo, guess)
 
 
 class AtLargestLevel:
@@ -132,5 +157,5 @@ class AtLargestLevel:
     def factor(self) -> float:
         return 1.0
 
-    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
+    def solve(self, degree: int, comm: MPI.Comm, geo: Geometry, guess: Model | None = None) -> LevelSolve:
         return solve_largest_level(with_changes(self.scene, degrees(degree)), comm, geo)
