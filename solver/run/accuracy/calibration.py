@@ -14,7 +14,6 @@ the triangle inequality alone (e_M <= D / (1 - rho)) gave 2.75e-3. One solve on 
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 from dolfinx import fem

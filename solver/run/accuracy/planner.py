@@ -20,6 +20,7 @@ then fixed for the run.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -35,6 +36,7 @@ from solver.physics.estimator import dorfler
 
 from .calibration import Calibration, calibrate
 from .constants import ADAPTED_RATE, C_TIMES_2MU, COST_PER_DOF
+from .ingredients import SIMPLIFY_FRACTION, Ingredient, degree_change, pilot_changes, simplified, without
 from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
@@ -130,6 +132,14 @@ class Planner:
         chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
         self._time("step", started)
         self.stages["prepare"] = started - s.started
+        started = time.perf_counter()
+        changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
+                                chosen.k0, chosen.k)
+        self._time("ingredients", started)
+        if acc.simplify:
+            changes, left_out = simplified(changes, s.tol)
+            if left_out > 0.0:
+                return self._simplified(changes, left_out)
         # the space parts get what the chosen step leaves of TOL
         share = s.tol - chosen.error
         at_k0 = with_changes(s.base, step(chosen.k0))
@@ -149,16 +159,54 @@ class Planner:
         self.stages["mesh"] = (time.perf_counter() - started - self.stages.get("zeta", 0.0)
                                - self.stages.get("calibration", 0.0))
         estimate = ErrorEstimate(self.seqs[degree][-1].estimate * probe.factor, zeta_bound, chosen.error)
+        started = time.perf_counter()
+        changes = [*changes, *self._degree_change(probe, degree, geo)]
+        self._time("ingredients", started)
         seconds = time.perf_counter() - s.started
         out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, self.C[degree], chosen.growth,
                    chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
-                   seconds, s.scene, dict(self.stages), self.calibration)
+                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes))
         self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
                  f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
                  f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
                  f"TOL {s.tol:.3e}; planned in {seconds:.2f} s ("
                  + ", ".join(f"{k} {v:.2f}" for k, v in self.stages.items()) + ")")
         return out
+
+    def _simplified(self, changes: list, left_out: float) -> Plan:
+        """The plan of the scene without the ingredients ``changes`` marks dropped, for the tolerance less their
+        changes (``left_out``); the result is the full model's within the tolerance. The plan keeps the user's
+        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part."""
+        s = self.setup
+        scene = s.scene
+        for i in changes:
+            if i.dropped:
+                scene = without(scene, i.name)
+        names = ", ".join(i.name for i in changes if i.dropped)
+        self.log(f"accuracy.simplify: left out {names} (changing the answer by {left_out:.2e} together, "
+                 f"{left_out / s.tol:.2g} TOL <= {SIMPLIFY_FRACTION:g} TOL); planned for TOL - {left_out:.2e}")
+        scene = scene.replace({"accuracy": {"tolerance": s.tol - left_out, "relative": False, "simplify": False}},
+                              label="accuracy.simplify")
+        inner = Planner(prepare(scene, self.comm, self.log), self.comm, self.log).plan()
+        seconds = time.perf_counter() - s.started
+        est = replace(inner.estimate, model=left_out)
+        kept = {i.name: i for i in inner.ingredients}
+        report = tuple(i if i.dropped else kept.get(i.name, i) for i in changes) + tuple(
+            i for i in inner.ingredients if i.name not in {c.name for c in changes})
+        stages = {k: self.stages.get(k, 0.0) + inner.stages.get(k, 0.0) for k in {*self.stages, *inner.stages}}
+        return replace(inner, tolerance=s.tol, estimate=est, seconds=seconds, stages=stages, ingredients=report)
+
+    def _degree_change(self, probe: SpaceProbe, degree: int, geo: Geometry) -> list:
+        """P2 over P1 on the chosen mesh (a P1 solve at t = 0 beside the last P2 one), where P2 was chosen and the
+        last solve is the t = 0 problem on that mesh; [] where P1 was chosen."""
+        if degree != 2:
+            return []
+        last = self.models.get(2)
+        if not isinstance(probe, AtLevel0) or last is None or last.geo is not geo:
+            return [Ingredient("degree", math.nan, "P2 over P1: not measured (the mesh was fitted to a later level)")]
+        p1 = probe.solve(1, self.comm, geo)
+        return [Ingredient("degree", degree_change(p1.model, last, self.comm), "P2 over P1: t = 0 solves on the "
+                           "chosen mesh")]
 
     def _needed_dofs(self, degree: int, growth: float, share: float) -> float:
         """The dofs the degree's first mesh predicts for ``share`` by its adapted rate (error ~ dofs^-rate)."""

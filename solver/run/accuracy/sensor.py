@@ -46,5 +46,5 @@ class ErrorSensor:
         tim = self.plan.time_error(row["t"])
         self.largest.space = max(self.largest.space, space)
         self.largest.time = max(self.largest.time, tim)
-        self.largest.total = max(self.largest.total, space + tim)
+        self.largest.total = max(self.largest.total, space + tim + self.plan.estimate.model)
         return {"est_space": space, "est_time": tim}

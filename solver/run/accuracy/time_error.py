@@ -52,6 +52,7 @@ class StepChoice:
     profile: np.ndarray  # the time error at k on those levels
     growth: float  # the indicator's largest level over its level 0 (the first pilot)
     largest_t: float  # the time of that level
+    pilot: PilotRun | None = None  # the run at k0 (the ingredients' changes are measured against it)
 
 
 def norms(model: Model, comm: MPI.Comm) -> tuple[Callable[[np.ndarray], float], Callable[[np.ndarray], float]]:
@@ -134,4 +135,5 @@ def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share:
             raise ToleranceError(tol, e_k4, 0, "time.k")
         k = pilot.time.T / n
     scale = (k / k4) ** p if e_k4 > 0 else 0.0
-    return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest])
+    return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest],
+                      pilots[0])
