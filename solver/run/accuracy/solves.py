@@ -32,6 +32,7 @@ class LevelSolve:
     cell_indicators: np.ndarray  # eta_K^2 of the owned cells
     dofs: int  # displacement dofs over all ranks
     strain_norm: float | None = None  # ||eps(u_0)|| (the t = 0 problem only)
+    iterations: int = 0  # Newton's iterations (the t = 0 problem only)
 
 
 def displacement_dofs(model: Model) -> int:
@@ -42,10 +43,10 @@ def displacement_dofs(model: Model) -> int:
 
 def warm_start(model: Model, guess: Model | None) -> None:
     """Newton's start for ``model``'s level 0: ``guess``'s displacement (a solve on a coarser mesh that ``model``'s
-    mesh refines, same degree: exact by interpolation) instead of zero. From zero, a stiff first contact takes
+    mesh refines, or on the same mesh at another degree) instead of zero. From zero, a stiff first contact takes
     plain Newton's steps and the compliance path; from the coarser solution it is in contact already and takes a few
     steps. 2-D only (the transfer's point location); elsewhere it starts from zero."""
-    if guess is None or model.geo.dim != 2 or guess.u.function_space.ufl_element() != model.u.function_space.ufl_element():
+    if guess is None or model.geo.dim != 2:
         return
     V = model.u.function_space
     bs = V.dofmap.index_map_bs
@@ -67,7 +68,8 @@ def solve_level0(cfg: Config, comm: MPI.Comm, geo: Geometry, guess: Model | None
     row = Stepper(model).step(0)
     est = estimator_for(model)
     cells = est.cells()
-    return LevelSolve(model, est.total(cells), cells, displacement_dofs(model), row["strain_norm"])
+    return LevelSolve(model, est.total(cells), cells, displacement_dofs(model), row["strain_norm"],
+                      row["newton_iterations"])
 
 
 def solve_largest_level(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
