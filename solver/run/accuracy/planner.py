@@ -276,9 +276,9 @@ class Planner:
     def _calibrate(self, probe: SpaceProbe, degree: int) -> None:
         """C for this scene from the sequence's last mesh and its uniform refinement (:func:`calibration.calibrate`);
         the sequence's estimates are C times eta again. Only on the t = 0 problem (a probe that runs to the level of
-        largest eta keeps the stored constant, said in the log)."""
+        largest eta, and a 3-D mesh (the transfer is 2-D), keep the stored constant, said in the log)."""
         self.calibrated.add(degree)
-        if not isinstance(probe, AtLevel0) or self.models.get(degree) is None:
+        if not isinstance(probe, AtLevel0) or self.models.get(degree) is None or self.setup.geo0.dim != 2:
             self.log(f"  P{degree}: the estimator's constant as stored, C = {self.C[degree]:.3g}")
             return
         started = time.perf_counter()
