@@ -7,12 +7,14 @@ tolerance: the planner's report, without the run. Writes benchmarks/results/ingr
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from mpi4py import MPI
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # this checkout's solver, not an installed one
 
 
 def main() -> int:
