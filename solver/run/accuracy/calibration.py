@@ -67,7 +67,12 @@ def calibrate(probe: SpaceProbe, degree: int, comm: MPI.Comm, model: Model, indi
     """C from ``model`` (a level-0 solve of ``probe`` on M, its indicator ``indicator``) and a solve on M's uniform
     refinement. Collective."""
     finer = probe.solve(degree, comm, refine_uniformly(model.geo), model)
-    D = strain_difference(model, finer.model, comm)
+    try:
+        D = strain_difference(model, finer.model, comm)
+    except ValueError:  # a point off this process's part of M (collective: every process raises in norms' stead)
+        D = math.nan
+    if not comm.allreduce(math.isfinite(D), op=MPI.LAND):
+        return Calibration(model.geo.num_cells(), indicator, finer.indicator, math.nan, stored, stored)
     rho = finer.indicator / indicator if indicator > 0 else 1.0
     C = stored if (rho >= RHO_MAX or indicator <= 0) else SAFETY * D / (math.sqrt(1.0 - rho**2) * indicator)
     return Calibration(model.geo.num_cells(), indicator, finer.indicator, D, stored, C)

@@ -56,6 +56,9 @@ class Ingredient:
 def without(cfg: Config, name: str) -> Config:
     """The scene without the ingredient ``name`` (memory, damage, truncation) or at first order (order)."""
     data = to_dict(cfg)
+    # the memory rule the loader resolved for the scene's order is resolved again (the planner tries order 2 on the
+    # simplified scene; a rule resolved for order 1 would hold it at order 1)
+    data["memory"] = {k: v for k, v in data["memory"].items() if k != "rule"}
     if name == "memory":
         data["memory"] = {"kernel": "none"}
     elif name == "damage":
@@ -64,8 +67,6 @@ def without(cfg: Config, name: str) -> Config:
         data["memory"] = {**data["memory"], "L": 1e300}
     elif name == "order":
         data["time"] = {**data["time"], "order": 1}
-        # the memory rule the loader resolved for order 2 is resolved again for order 1 (the paper's left sum)
-        data["memory"] = {k: v for k, v in data["memory"].items() if k != "rule"}
     else:
         raise ValueError(f"no ingredient {name!r}")
     return from_dict(data, source=cfg.source)

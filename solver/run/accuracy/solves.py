@@ -54,7 +54,10 @@ def warm_start(model: Model, guess: Model | None) -> None:
     owned = V.dofmap.index_map.size_local
     try:
         P = interpolation_matrix(guess.u.function_space, V.tabulate_dof_coordinates()[:owned, :2])
-    except ValueError:  # a point off this process's part of the coarser mesh: this process starts from zero
+        found = True
+    except ValueError:  # a point off this process's part of the other mesh
+        found = False
+    if not model.geo.comm.allreduce(found, op=MPI.LAND):  # all processes start from zero alike
         return
     coarse = guess.u.x.array.reshape(-1, bs)
     model.u.x.array[:owned * bs] = (P @ coarse).ravel()
