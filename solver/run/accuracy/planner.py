@@ -11,8 +11,14 @@ space part, the rest the time part). In order:
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
    is within its part; the solves are those of a :class:`solves.SpaceProbe` (the t = 0 problem, or coarse-step
    runs to the level of largest indicator where it grows more than GROWTH_AT_0);
-4. zeta's part (:meth:`Planner._fit_zeta`, :mod:`zeta`): while the two space parts exceed the share, a Dörfler
-   step for u that leaves zeta's part room, else a uniform refinement.
+   Each solve starts from the previous mesh's solution; on the way the estimator's constant is calibrated on the
+   scene (:mod:`calibration`) and zeta's part measured on a mesh about an eighth of the final one, u then aiming at
+   what it leaves of the share;
+4. zeta's part (:meth:`Planner._fit_zeta`, :mod:`zeta`), where that measured part is over ZETA_SHARE of the share:
+   while the two space parts exceed the share, a Dörfler step for u that leaves zeta's part room, else a uniform
+   refinement.
+The ingredients' changes of the answer (:mod:`ingredients`) are measured after the step; with
+``accuracy.simplify`` the plan is made again for the scene without those it leaves out.
 
 The damage's degree follows the displacement's; the order in time is 2 where the scene allows it. The mesh is
 then fixed for the run.
