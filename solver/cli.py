@@ -276,6 +276,8 @@ def _report(rows: list[dict], seconds: float, plan, sensors: tuple, model, outdi
         log.info("estimated error %.3e (space %.3e, time %.3e; max over levels) for tolerance %.3e: P%d, order %d, "
                  "k = %g, %d cells", largest.total, largest.space, largest.time, plan.tolerance, plan.degree,
                  plan.order, plan.k, model.geo.num_cells())
+        for ingredient in plan.ingredients:
+            log.info("  %s", ingredient.line(plan.tolerance))
         if largest.total > plan.tolerance:
             log.info("warning: the estimate over the run is above the tolerance (the growth measured on the start "
                      "mesh was too small); run again with a smaller tolerance")

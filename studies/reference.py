@@ -57,9 +57,10 @@ class PointwiseError:
         self.nq = len(w)
         self.model = model
         self.Pz = self.zeta = None
-        if model.damage is not None and Z_ref is not None:
+        if Z_ref is not None:  # a judged model without damage (accuracy.simplify left it out) has zeta = zeta0
             self.Pz = interpolation_matrix(Z_ref, flat)
-            self.zeta = fem.Expression(model.damage.zeta, X)
+            self.zeta = fem.Expression(model.damage.zeta, X) if model.damage is not None else None
+            self.zeta0 = model.cfg.damage.zeta0
 
     def __call__(self, u_ref: np.ndarray, zeta_ref: np.ndarray | None) -> tuple[float, float]:
         """(||eps(u_ref - u)||, ||zeta_ref - zeta||) for the judged model's current fields."""
@@ -72,7 +73,8 @@ class PointwiseError:
         eu = float(np.sqrt(max(np.einsum("p,pi,pi->", self.W, d, d), 0.0)))
         ez = 0.0
         if self.Pz is not None and zeta_ref is not None:
-            dz = self.Pz @ zeta_ref - self.zeta.eval(self.cells).ravel()
+            z_h = self.zeta.eval(self.cells).ravel() if self.zeta is not None else self.zeta0
+            dz = self.Pz @ zeta_ref - z_h
             ez = float(np.sqrt(max(np.einsum("p,p,p->", self.W, dz, dz), 0.0)))
         return eu, ez
 

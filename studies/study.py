@@ -483,6 +483,8 @@ def main(argv: list[str] | None = None) -> int:
                     "a tolerance reference is out of reach (stated in the output)")
     to.add_argument("--levels", type=int, default=6, help="uniform meshes per series (n = 4, 8, ... or r = 0, 1, ...)")
     to.add_argument("--steps", type=int, nargs="+", default=[10, 20, 40, 80], help="uniform steps per run (T / k)")
+    to.add_argument("--no-sweep", action="store_true", help="leave out the uniform sweep (the verified uniform "
+                    "alternative of every tolerance run is measured all the same)")
     args = p.parse_args(argv)
     if args.which == "tolerance":
         from studies.tolerance import main as tolerance_main

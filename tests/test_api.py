@@ -185,8 +185,12 @@ def test_tolerance_runs_as_the_cli_does(tmp_path):
     assert res.returncode == 0, res.stderr
     out = api.run(api.load(EXAMPLE1).replace({"time": {"T": 0.2}}), tmp_path / "api", tolerance=1e-2)
     want, got = (json.loads((d / "plan.json").read_text()) for d in (cli, tmp_path / "api"))
-    want.pop("planning_seconds"), got.pop("planning_seconds")
+    for d in (want, got):  # seconds
+        d.pop("planning_seconds"), d.pop("planning_stages")
     assert _close(got, want), (got, want)
+    assert set(want["ingredients"]) >= {"memory", "damage", "truncation", "order"}  # each ingredient's change
+    for name in want["ingredients"]:  # and one line each at the end of the run
+        assert f"{name}: changes the answer by" in res.stdout + res.stderr
     assert out.plan.degree == want["u_degree"] and out.plan.k == want["k"]
     assert (tmp_path / "api" / "mesh.xdmf").read_text() == (cli / "mesh.xdmf").read_text()
     a, b = read_csv(cli / "timeseries.csv"), read_csv(tmp_path / "api" / "timeseries.csv")

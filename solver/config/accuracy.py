@@ -19,7 +19,8 @@ from .fields import Ctx, boolean, check_keys, integer, names, need, number
 class AccuracyConfig:
     """``tolerance``: bound on max over levels of ||eps(u - u_exact)|| + ||zeta - zeta_exact|| (absolute; with
     ``relative``, times ||eps(u_0)||). ``space_share`` of it goes to the mesh, the rest to the step; ``theta``
-    is the Dörfler fraction; ``degrees`` the displacement degrees the solver may choose from."""
+    is the Dörfler fraction; ``degrees`` the displacement degrees the solver may choose from; ``simplify`` leaves
+    out the memory term and the damage where they change the answer by little (solver/run/accuracy/ingredients.py)."""
 
     tolerance: float | None = None
     relative: bool = False
@@ -27,6 +28,7 @@ class AccuracyConfig:
     theta: float = 0.5
     max_dofs: int = 2_000_000
     degrees: tuple[int, ...] = DEGREES
+    simplify: bool = False
 
     @property
     def enabled(self) -> bool:
@@ -51,7 +53,8 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> AccuracyConfig:
         raise ctx.fail("accuracy.degrees", raw, "must be a non-empty list of degrees from 1, 2")
     degrees = tuple(sorted({integer(ctx, "accuracy.degrees", x) for x in raw}))
     need(ctx, "accuracy.degrees", raw, set(degrees) <= set(DEGREES), "allowed: a list of degrees from 1, 2")
-    return AccuracyConfig(tol, relative, share, theta, max_dofs, degrees)
+    simplify = boolean(ctx, "accuracy.simplify", t.get("simplify", d.simplify))
+    return AccuracyConfig(tol, relative, share, theta, max_dofs, degrees, simplify)
 
 
 def tolerance(ctx: Ctx, key: str, v) -> float:

@@ -106,6 +106,8 @@ MEANING: dict[str, str] = {
     "accuracy.theta": "Dörfler marking fraction of the mesh refinement",
     "accuracy.max_dofs": "refuse plans above this many displacement dofs",
     "accuracy.degrees": "displacement degrees the planner may choose from",
+    "accuracy.simplify": "leave out the memory term and the damage where together they change the answer by at most "
+                         "a tenth of the tolerance (plan.json lists each ingredient's change)",
 }
 
 # Allowed values that are a list of choices, from the section modules' constants.

@@ -17,7 +17,7 @@ def test_bad_tolerances_are_refused(bad):
 
 
 @pytest.mark.parametrize("key,bad", [("space_share", "0"), ("space_share", "1"), ("theta", "1.5"), ("max_dofs", "0"),
-                                     ("degrees", "[]"), ("degrees", "[3]")])
+                                     ("degrees", "[]"), ("degrees", "[3]"), ("simplify", "1"), ("simplify", "\"yes\"")])
 def test_bad_settings_are_refused(key, bad):
     with pytest.raises(ConfigError) as err:
         load(SCENE, [f"accuracy.{key}={bad}"])
@@ -26,3 +26,8 @@ def test_bad_settings_are_refused(key, bad):
 
 def test_a_tolerance_on_a_3d_scene_is_accepted():
     assert load(ROOT / "configs/example1_3d.toml", ["accuracy.tolerance=1e-2"]).accuracy.tolerance == 1e-2
+
+
+def test_simplify_is_off_unless_asked():
+    assert load(SCENE).accuracy.simplify is False
+    assert load(SCENE, ["accuracy.simplify=true"]).accuracy.simplify is True

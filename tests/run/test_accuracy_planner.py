@@ -27,7 +27,8 @@ def _plan(comm, tol, accuracy=None):
 
 
 def test_the_dorfler_fraction_follows_the_distance_to_the_target():
-    assert dorfler_fraction(0.5, 1.1) == 0.5  # near: the scene's theta
+    assert dorfler_fraction(0.5, 1.3) == 0.5  # near: the scene's theta
+    assert dorfler_fraction(0.5, 1.05) == pytest.approx(2.0 * (1.0 - 1.0 / 1.05**2))  # a few per cent over: a little
     assert dorfler_fraction(0.5, 3.0) == pytest.approx(1.0 - 1.0 / 9.0)
     assert dorfler_fraction(0.5, 100.0) == THETA_MAX  # far: capped
 

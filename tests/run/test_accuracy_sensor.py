@@ -28,3 +28,19 @@ def test_the_sensor_adds_c_eta_and_the_plans_parts_and_keeps_their_largest(comm)
     total = max(r["est_space"] + r["est_time"] for r in rows)
     assert (sensor.largest.space, sensor.largest.time, sensor.largest.total) == (space, tim, total)
     assert MPI.COMM_WORLD.allreduce(sensor.largest.total, op=MPI.MAX) == sensor.largest.total  # the same on ranks
+
+
+def test_eta_is_evaluated_on_about_samples_levels_and_the_last(comm):
+    from solver.run.accuracy.sensor import SAMPLES
+
+    scene = load(ROOT / "configs/example1.toml").replace({"time": {"T": 0.5}, "accuracy": {"tolerance": 1e-2}})
+    p = plan(scene, comm, log=lambda *a: None)
+    cfg = p.config.replace({"time": {"k": 0.5 / 40}})  # 40 steps
+    model = build_model(cfg, comm, p.geo)
+    sensor = ErrorSensor(model, p)
+    seen = []
+    total = sensor.est.total
+    sensor.est.total = lambda *a: seen.append(1) or total(*a)
+    rows = list(levels(model, sensors=(sensor,)))
+    assert len(rows) == 41 and SAMPLES <= len(seen) <= SAMPLES + 2
+    assert rows[-1]["est_space"] == pytest.approx(p.C * total() + p.estimate.space_zeta, rel=1e-12)  # the last: now

@@ -56,3 +56,17 @@ def test_a_probe_solves_with_the_degree_asked(comm, scene_geo):
     lv = AtLevel0(cfg, 1.0).solve(2, comm, geo)
     assert lv.model.cfg.discretization.u_degree == 2 == lv.model.cfg.discretization.zeta_degree
     assert lv.indicator == pytest.approx(solve_level0(with_changes(cfg, degrees(2)), comm, geo).indicator, rel=1e-12)
+
+
+def test_a_level0_solve_started_from_the_coarser_mesh_finds_the_same_solution_in_fewer_steps(comm):
+    from solver.mesh.adapt import refine_uniformly
+
+    cfg = with_changes(load(ROOT / "configs/example1.toml"), {"mesh": {"nx": 8, "ny": 8}}, degrees(2))
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    coarse = solve_level0(cfg, comm, geo)
+    fine = refine_uniformly(geo)
+    cold = solve_level0(cfg, comm, fine)
+    warm = solve_level0(cfg, comm, fine, coarse.model)
+    assert warm.indicator == pytest.approx(cold.indicator, rel=1e-6)
+    assert np.allclose(warm.model.u.x.array, cold.model.u.x.array, atol=1e-9 * np.abs(cold.model.u.x.array).max())
+    assert warm.iterations < cold.iterations

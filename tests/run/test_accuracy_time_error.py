@@ -60,8 +60,8 @@ def test_the_chosen_step_is_the_largest_within_its_share(comm):
     share = 1e-4
     chosen = choose_step(cfg, comm, geo, 2, share, 1e-3, log=lambda *a: None)
     assert chosen.k0 == cfg.time.T / N0 and chosen.error <= SAFETY * share
-    j = round(np.log2(chosen.k0 / chosen.k))
-    assert chosen.k == chosen.k0 / 2**j
-    if j > 0:  # the step twice as large would not fit
-        assert chosen.error * 2**chosen.rate > SAFETY * share
+    n = round(cfg.time.T / chosen.k)
+    assert chosen.k == pytest.approx(cfg.time.T / n, rel=1e-12) and n >= N0
+    if n > N0:  # the next larger step T / (n - 1) would not fit
+        assert chosen.error * (n / (n - 1)) ** chosen.rate > SAFETY * share
     assert chosen.growth >= 1.0 and 0.0 <= chosen.largest_t <= cfg.time.T

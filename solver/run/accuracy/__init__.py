@@ -8,6 +8,8 @@ Where to read it:
 - :mod:`.solves` -- the solves the planner measures with, and the strategies that judge u's mesh;
 - :mod:`.records` -- what a plan chose (:class:`Plan`, plan.json) and its estimates;
 - :mod:`.sensor` -- the run's estimated error per level (:class:`ErrorSensor`);
+- :mod:`.calibration` -- the estimator's constant on the scene; :mod:`.ingredients` -- how much each optional
+  ingredient changes the answer, and what ``accuracy.simplify`` leaves out;
 - :mod:`.constants` -- calibration constants; :mod:`.memory` -- the dof limit; :mod:`.check` -- the command
   line's check of ``--set`` against a tolerance; :mod:`.scene` -- the scene changes the planner tries.
 """

@@ -11,8 +11,14 @@ space part, the rest the time part). In order:
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
    is within its part; the solves are those of a :class:`solves.SpaceProbe` (the t = 0 problem, or coarse-step
    runs to the level of largest indicator where it grows more than GROWTH_AT_0);
-4. zeta's part (:meth:`Planner._fit_zeta`, :mod:`zeta`): while the two space parts exceed the share, a Dörfler
-   step for u that leaves zeta's part room, else a uniform refinement.
+   Each solve starts from the previous mesh's solution; on the way the estimator's constant is calibrated on the
+   scene (:mod:`calibration`) and zeta's part measured on a mesh about an eighth of the final one, u then aiming at
+   what it leaves of the share;
+4. zeta's part (:meth:`Planner._fit_zeta`, :mod:`zeta`), where that measured part is over ZETA_SHARE of the share:
+   while the two space parts exceed the share, a Dörfler step for u that leaves zeta's part room, else a uniform
+   refinement.
+The ingredients' changes of the answer (:mod:`ingredients`) are measured after the step; with
+``accuracy.simplify`` the plan is made again for the scene without those it leaves out.
 
 The damage's degree follows the displacement's; the order in time is 2 where the scene allows it. The mesh is
 then fixed for the run.
@@ -20,9 +26,10 @@ then fixed for the run.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from mpi4py import MPI
@@ -33,7 +40,9 @@ from solver.mesh.adapt import refine, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
 
+from .calibration import Calibration, calibrate
 from .constants import COST_PER_DOF, adapted_rate, c_times_2mu
+from .ingredients import SIMPLIFY_FRACTION, Ingredient, degree_change, pilot_changes, simplified, without
 from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
@@ -50,13 +59,23 @@ ZETA_SHARE = 0.3  # of the space share, left to the damage's space error while t
 # (ROOM_MARGIN of zeta's part kept for its change on the new mesh) before any uniform refinement
 ROOM_ZETA_MAX = 0.6
 ROOM_MARGIN = 0.25
+# zeta's part is measured on the adaptive sequence's mesh once the mesh u needs is predicted within ZETA_PROBE_RATIO
+# times its cells (runs at the pilots' coarsest step on a mesh about an eighth of the final one; on Example 1 at 1e-4 a
+# thirtieth gave a bound of 2.1e-5 where an eighth gave 1.6e-6, and the tighter target for u cost more than it saved)
+ZETA_PROBE_RATIO = 8.0
+# the estimator's constant is calibrated on the scene (:func:`calibration.calibrate`) on the sequence's first mesh whose
+# predicted final mesh is within CALIBRATE_RATIO times its cells (its uniform refinement: a thirtieth of the final mesh)
+CALIBRATE_RATIO = 128.0
 
 
 def dorfler_fraction(theta: float, ratio: float) -> float:
     """The Dörfler fraction for an estimate ``ratio`` times its target: the cells carrying 1 - 1/ratio^2 of
     eta^2 (refining them all away would leave the target's eta^2), at least ``theta`` and at most THETA_MAX, so
-    that few solve-estimate-refine rounds are needed (each is a mesh to build)."""
-    return min(THETA_MAX, max(theta, 1.0 - 1.0 / ratio**2))
+    that few solve-estimate-refine rounds are needed (each is a mesh to build). Near the target (1 - 1/ratio^2
+    below theta / 2) twice that share instead of theta: a mesh a few per cent over its target is refined a little,
+    not by half (which overshoots the target, and the run pays for the cells)."""
+    needed = 1.0 - 1.0 / ratio**2
+    return min(THETA_MAX, max(needed, min(theta, 2.0 * needed)))
 
 
 @dataclass(frozen=True)
@@ -106,12 +125,28 @@ class Planner:
         self.acc = setup.scene.accuracy
         self.seqs: dict[int, list[MeshRecord]] = {d: [] for d in self.acc.degrees}
         self.runs = ZetaRuns()
+        self.models: dict = {}  # per degree, the last level-0 model solved (the next nested solve's start)
+        self.C = dict(setup.constants)  # per degree, the estimator's constant (stored, then calibrated)
+        self.calibrated: set[int] = set()
+        self.calibration: Calibration | None = None
+        self.stages: dict[str, float] = {}  # seconds per stage of the plan
 
     def plan(self) -> Plan:
         """The stages in the module docstring's order. Collective."""
         s, acc = self.setup, self.acc
         pilot = with_changes(s.base, degrees(min(acc.degrees)))  # the time error hardly depends on the degree
+        started = time.perf_counter()
         chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
+        self._time("step", started)
+        self.stages["prepare"] = started - s.started
+        started = time.perf_counter()
+        changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
+                                chosen.k0, chosen.k)
+        self._time("ingredients", started)
+        if acc.simplify:
+            changes, left_out = simplified(changes, s.tol)
+            if left_out > 0.0:
+                return self._simplified(changes, left_out)
         # the space parts get what the chosen step leaves of TOL
         share = s.tol - chosen.error
         at_k0 = with_changes(s.base, step(chosen.k0))
@@ -119,20 +154,66 @@ class Planner:
         if chosen.growth > GROWTH_AT_0:
             probe = AtLargestLevel(with_changes(at_k0, {"time": {"T": chosen.largest_t}}))
             self.log(f"  the mesh is adapted to the level of largest eta, t = {chosen.largest_t:g}")
+        started = time.perf_counter()
         degree, (geo, cells) = self._degree(probe, share)
-        geo, cells = self._mesh(probe, degree, share, geo, cells)
+        self._time("degree", started)
         # zeta's runs go to the scene's T at the pilots' coarsest step
-        geo, zeta_bound = self._fit_zeta(probe, degree, share, geo, cells, with_changes(at_k0, degrees(degree)))
+        run_k0 = with_changes(at_k0, degrees(degree))
+        started = time.perf_counter()
+        geo, cells, zeta_bound = self._mesh(probe, degree, share, geo, cells, run_k0)
+        if zeta_bound is None:
+            geo, zeta_bound = self._fit_zeta(probe, degree, share, geo, cells, run_k0)
+        self.stages["mesh"] = (time.perf_counter() - started - self.stages.get("zeta", 0.0)
+                               - self.stages.get("calibration", 0.0))
         estimate = ErrorEstimate(self.seqs[degree][-1].estimate * probe.factor, zeta_bound, chosen.error)
+        started = time.perf_counter()
+        changes = [*changes, *self._degree_change(probe, degree, geo)]
+        self._time("ingredients", started)
         seconds = time.perf_counter() - s.started
-        out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, s.constants[degree], chosen.growth,
+        out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, self.C[degree], chosen.growth,
                    chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
-                   seconds, s.scene)
+                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes))
         self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
                  f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
                  f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
-                 f"TOL {s.tol:.3e}; planned in {seconds:.1f} s")
+                 f"TOL {s.tol:.3e}; planned in {seconds:.2f} s ("
+                 + ", ".join(f"{k} {v:.2f}" for k, v in self.stages.items()) + ")")
         return out
+
+    def _simplified(self, changes: list, left_out: float) -> Plan:
+        """The plan of the scene without the ingredients ``changes`` marks dropped, for the tolerance less their
+        changes (``left_out``); the result is the full model's within the tolerance. The plan keeps the user's
+        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part."""
+        s = self.setup
+        scene = s.scene
+        for i in changes:
+            if i.dropped:
+                scene = without(scene, i.name)
+        names = ", ".join(i.name for i in changes if i.dropped)
+        self.log(f"accuracy.simplify: left out {names} (changing the answer by {left_out:.2e} together, "
+                 f"{left_out / s.tol:.2g} TOL <= {SIMPLIFY_FRACTION:g} TOL); planned for TOL - {left_out:.2e}")
+        scene = scene.replace({"accuracy": {"tolerance": s.tol - left_out, "relative": False, "simplify": False}},
+                              label="accuracy.simplify")
+        inner = Planner(prepare(scene, self.comm, self.log), self.comm, self.log).plan()
+        seconds = time.perf_counter() - s.started
+        est = replace(inner.estimate, model=left_out)
+        kept = {i.name: i for i in inner.ingredients}
+        report = tuple(i if i.dropped else kept.get(i.name, i) for i in changes) + tuple(
+            i for i in inner.ingredients if i.name not in {c.name for c in changes})
+        stages = {k: self.stages.get(k, 0.0) + inner.stages.get(k, 0.0) for k in {*self.stages, *inner.stages}}
+        return replace(inner, tolerance=s.tol, estimate=est, seconds=seconds, stages=stages, ingredients=report)
+
+    def _degree_change(self, probe: SpaceProbe, degree: int, geo: Geometry) -> list:
+        """P2 over P1 on the chosen mesh (a P1 solve at t = 0 beside the last P2 one), where P2 was chosen and the
+        last solve is the t = 0 problem on that mesh; [] where P1 was chosen."""
+        if degree != 2:
+            return []
+        last = self.models.get(2)
+        if not isinstance(probe, AtLevel0) or last is None or last.geo is not geo:
+            return [Ingredient("degree", math.nan, "P2 over P1: not measured (the mesh was fitted to a later level)")]
+        p1 = probe.solve(1, self.comm, geo, last)
+        return [Ingredient("degree", degree_change(p1.model, last, self.comm), "P2 over P1: t = 0 solves on the "
+                           "chosen mesh")]
 
     def _needed_dofs(self, degree: int, growth: float, share: float) -> float:
         """The dofs the degree's first mesh predicts for ``share`` by its adapted rate (error ~ dofs^-rate)."""
@@ -162,13 +243,77 @@ class Planner:
             raise ToleranceError(self.setup.tol, first.estimate * probe.growth, first.dofs, self.setup.limit,
                                  target=share, predicted=needed[best])
 
-    def _mesh(self, probe: SpaceProbe, degree: int, share: float, geo: Geometry, cells: np.ndarray) -> tuple:
-        """u's mesh: adapted on from the degree's probe until C eta times the growth is within (1 - ZETA_SHARE) of
-        the space share. Returns (mesh, eta_K^2)."""
-        target = (1.0 - ZETA_SHARE) * share / probe.factor
-        if self.seqs[degree][-1].estimate > target:
-            geo, cells = self._adapt(probe, degree, target, marked=(geo, cells))
-        return geo, cells
+    def _mesh(self, probe: SpaceProbe, degree: int, share: float, geo: Geometry, cells: np.ndarray,
+              run_k0: Config) -> tuple:
+        """u's mesh: adapted on from the degree's probe until C eta times the growth G fits what zeta's part leaves of
+        the space share. Without damage that is the whole share. With damage, zeta's part is measured on the
+        sequence's mesh once the mesh u needs is predicted within ZETA_PROBE_RATIO times its cells (:meth:`_zeta_on`,
+        nested runs at the pilots' step); if it is at most ZETA_SHARE of the share, u aims at share - that part, and
+        the part counts for the finer meshes that refine it (zeta's error falls with the cells: e ~ cells^-s,
+        s >= 1/2, as :mod:`.zeta` models it). Returns (mesh, eta_K^2, zeta's bound), the bound None where zeta's part
+        is left to :meth:`_fit_zeta` (over ZETA_SHARE of the share)."""
+        G = probe.factor
+        damage = run_k0.damage.enabled
+        target = (share if not damage else (1.0 - ZETA_SHARE) * share) / G
+        found: list[float] = []
+
+        def retarget(rec: MeshRecord, final: bool) -> float | None:
+            predicted = rec.cells * max(rec.estimate / target, 1.0) ** (1.0 / adapted_rate(self.setup.geo0.dim)[degree])
+            if degree not in self.calibrated and (final or predicted <= CALIBRATE_RATIO * rec.cells):
+                self._calibrate(probe, degree)
+                rec = self.seqs[degree][-1]
+                final = rec.estimate <= target
+                predicted = rec.cells * max(rec.estimate / target, 1.0) ** (1.0 / adapted_rate(self.setup.geo0.dim)[degree])
+            if not damage or found:
+                return None
+            if not final and predicted > ZETA_PROBE_RATIO * rec.cells:
+                return None
+            bound = self._zeta_on(degree, rec.geo, run_k0)
+            found.append(bound)
+            if bound > ZETA_SHARE * share:
+                return None
+            return (share - bound) / G
+
+        geo, cells = self._adapt(probe, degree, target, marked=(geo, cells), retarget=retarget, solved_first=True)
+        if damage and (not found or found[0] > ZETA_SHARE * share):
+            return geo, cells, None
+        return geo, cells, (found[0] if found else 0.0)
+
+    def _calibrate(self, probe: SpaceProbe, degree: int) -> None:
+        """C for this scene from the sequence's last mesh and its uniform refinement (:func:`calibration.calibrate`);
+        the sequence's estimates are C times eta again. Only on the t = 0 problem (a probe that runs to the level of
+        largest eta, and a 3-D mesh, whose uniform refinement has 8 times its cells and where the stored constant was
+        measured above the tetrahedra's (docs/guide/accuracy.md), keep the stored constant, said in the log)."""
+        self.calibrated.add(degree)
+        if not isinstance(probe, AtLevel0) or self.models.get(degree) is None or self.setup.geo0.dim != 2:
+            self.log(f"  P{degree}: the estimator's constant as stored, C = {self.C[degree]:.3g}")
+            return
+        started = time.perf_counter()
+        cal = calibrate(probe, degree, self.comm, self.models[degree], self.seqs[degree][-1].indicator,
+                        self.C[degree])
+        self.calibration = cal
+        self.C[degree] = cal.C
+        self.seqs[degree][:] = [replace(r, estimate=cal.C * r.indicator) for r in self.seqs[degree]]
+        self._time("calibration", started)
+        self.log(f"  P{degree}: C = {cal.C:.3g} calibrated on {cal.cells} cells and their uniform refinement "
+                 f"(difference {cal.difference:.3e}, eta ratio {cal.ratio:.3f}; stored {cal.stored:.3g})")
+
+    def _time(self, stage: str, started: float) -> None:
+        self.stages[stage] = self.stages.get(stage, 0.0) + time.perf_counter() - started
+
+    def _zeta_on(self, degree: int, geo: Geometry, run_k0: Config) -> float:
+        """zeta's space error bound on ``geo`` (a mesh of the degree's sequence), from the sequence's earlier meshes
+        it refines (each at most a quarter of the next one's cells) or its uniform refinement (:func:`zeta_space`)."""
+        chain: list[Geometry] = []
+        for r in reversed(self.seqs[degree]):
+            if r.geo is not None and r.geo is not geo and len(chain) < 2 and \
+                    r.cells * 4 <= (chain[0] if chain else geo).num_cells():
+                chain.insert(0, r.geo)
+        started = time.perf_counter()
+        z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
+        self._time("zeta", started)
+        self.log(f"  zeta's space error on {geo.num_cells()} cells <= {z.bound:.3e}")
+        return z.bound
 
     def _fit_zeta(self, probe: SpaceProbe, degree: int, share: float, geo: Geometry, cells: np.ndarray,
                   run_k0: Config) -> tuple[Geometry, float]:
@@ -177,7 +322,7 @@ class Planner:
         the share: where zeta's part leaves room, a Dörfler step for u first (:meth:`_make_room`); else (or if that
         step does not fit) the mesh is refined uniformly (the earlier runs are kept, not repeated). Returns the
         mesh and zeta's bound on it."""
-        seq, C, G = self.seqs[degree], self.setup.constants[degree], probe.factor
+        seq, C, G = self.seqs[degree], self.C[degree], probe.factor
         chain: list[Geometry] = []  # the coarsest first
         for r in reversed(seq):
             if r.geo is not None and len(chain) < 2 and r.cells * 4 <= (chain[0] if chain else geo).num_cells():
@@ -196,7 +341,8 @@ class Planner:
                                      target=share - seq[-1].estimate * G)
             chain, geo = [*chain, geo][-2:], finer
             z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
-            lv = probe.solve(degree, self.comm, geo)
+            lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
+            self.models[degree] = lv.model
             cells = lv.cell_indicators
             seq.append(MeshRecord(degree, geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator, uniform=True))
             self.log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {seq[-1].estimate:.3e}, zeta's space "
@@ -213,7 +359,7 @@ class Planner:
         step as the estimate's on M: the time error cancels). Taken if C eta' G + zeta_bound + D <= share; returns
         (M', zeta_bound + D), or None (M' is then dropped, and the caller refines M uniformly)."""
         seq, G = self.seqs[degree], probe.factor
-        n = len(seq)
+        n, kept = len(seq), self.models.get(degree)
         target = (share - (1.0 + ROOM_MARGIN) * zeta_bound) / G
         finer, _ = self._adapt(probe, degree, target, marked=(geo, cells))
         bound = zeta_bound
@@ -225,31 +371,45 @@ class Planner:
         if total <= share:
             return finer, bound
         del seq[n:]
+        self.models[degree] = kept
         return None
 
     def _adapt(self, probe: SpaceProbe, degree: int, target: float, geo: Geometry | None = None,
-               max_steps: int | None = None, marked: tuple | None = None) -> tuple:
+               max_steps: int | None = None, marked: tuple | None = None,
+               retarget: Callable[[MeshRecord, bool], float | None] | None = None,
+               solved_first: bool = False) -> tuple:
         """Dörfler-refine until C eta <= target (or ``max_steps`` meshes solved), appending each mesh's record to
         the degree's sequence; beyond the dof limit, a ToleranceError for the user's tolerance. Starts on ``geo``,
-        or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Returns the last
-        mesh and its eta_K^2."""
-        seq, C, theta = self.seqs[degree], self.setup.constants[degree], self.acc.theta
+        or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Each solve starts
+        from the previous mesh's solution (nested: :func:`solves.warm_start`). ``retarget(record, final)``, after
+        each solve, may give a new target (``final``: the record meets the old one); with ``solved_first``, it is
+        asked first about ``marked`` itself. Returns the last mesh and its eta_K^2."""
+        seq, theta = self.seqs[degree], self.acc.theta
 
         def refined(mesh: Geometry, cells: np.ndarray) -> Geometry:
             fraction = dorfler_fraction(theta, seq[-1].estimate / target)
             return refine(mesh, np.flatnonzero(dorfler(cells, fraction, self.comm)))
 
         if marked is not None:
+            if solved_first and retarget is not None:
+                new = retarget(seq[-1], seq[-1].estimate <= target)
+                target = target if new is None else new
+                if seq[-1].estimate <= target:
+                    return marked
             geo = refined(*marked)
         solved = 0
         while True:
-            lv = probe.solve(degree, self.comm, geo)
-            rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator,
+            lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
+            self.models[degree] = lv.model
+            rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, self.C[degree] * lv.indicator,
                              geo=lv.model.geo)
             seq.append(rec)
             solved += 1
             self.log(f"  P{degree}: {rec.cells} cells, {rec.dofs} dofs, C eta = {rec.estimate:.3e} "
                      f"(target {target:.3e})")
+            if retarget is not None:
+                new = retarget(rec, rec.estimate <= target)
+                target = target if new is None else new
             if rec.estimate <= target or (max_steps is not None and solved >= max_steps):
                 return lv.model.geo, lv.cell_indicators
             if rec.dofs > self.setup.max_dofs:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -19,13 +19,17 @@ class ErrorEstimate:
     space_u: float  # C times the estimator's indicator, times its growth over the run
     space_zeta: float  # the damage's space error, from nested meshes
     time: float  # the time error of the chosen step, by step doubling
+    model: float = 0.0  # the changes of the ingredients accuracy.simplify left out (ingredients.py)
 
     @property
     def total(self) -> float:
-        return self.space_u + self.space_zeta + self.time
+        return self.space_u + self.space_zeta + self.time + self.model
 
     def as_dict(self) -> dict[str, float]:
-        return {"space_u": self.space_u, "space_zeta": self.space_zeta, "time": self.time}
+        out = {"space_u": self.space_u, "space_zeta": self.space_zeta, "time": self.time}
+        if self.model:
+            out["model"] = self.model
+        return out
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,9 @@ class Plan:
     adaptation: tuple[MeshRecord, ...]
     seconds: float  # planning time
     scene: Config  # the scene planned for
+    stages: dict = field(default_factory=dict)  # seconds per stage of the planning
+    calibration: object = None  # the estimator constant's calibration on the scene (calibration.Calibration), or None
+    ingredients: tuple = ()  # each optional ingredient's change of the answer (ingredients.Ingredient)
 
     @property
     def changes(self) -> dict:
@@ -89,4 +96,8 @@ class Plan:
         return {"tolerance": self.tolerance, "u_degree": self.degree, "zeta_degree": self.degree, "order": self.order,
                 "k": self.k, "cells": self.geo.num_cells(), "estimate": self.estimate.as_dict(), "C": self.C,
                 "growth": self.growth, "time_rate": self.time_rate,
-                "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds}
+                "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds,
+                "planning_stages": self.stages,
+                "calibration": None if self.calibration is None else self.calibration.summary(),
+                "ingredients": {i.name: i.summary() for i in self.ingredients},
+                "left_out": [i.name for i in self.ingredients if i.dropped]}

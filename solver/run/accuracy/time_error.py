@@ -1,7 +1,7 @@
 """The time part: step doubling on the start mesh (docs/guide/accuracy.md, "step").
 
 Runs at k0, k0/2 and k0/4 (k0 = T/N0) give the observed order p (at most the scheme's) and the error of k0/4,
-D/(2^p - 1), in the paper's norm (docs/model.md §3.6); the step is the largest T/(N0 2^j) whose extrapolated
+D/(2^p - 1), in the paper's norm (docs/model.md §3.6); the step is the largest T/n (n >= N0) whose extrapolated
 error is within SAFETY times the time's share of the tolerance.
 """
 
@@ -24,10 +24,10 @@ from solver.run.model import Model
 from .scene import step, with_changes
 from .solves import PilotRun, pilot_run
 
-N0 = 10  # the coarsest step is T / N0; every step considered is T / (N0 2^j)
+N0 = 10  # the coarsest step is T / N0; every step considered is T / n, n >= N0
 SAFETY = 0.8  # of the time's share, for the extrapolated error of the chosen step
 START_HALVINGS = 6  # a start step the scheme cannot take is halved, and the three runs start again
-MAX_HALVINGS = 20  # the step is refused beyond T / (N0 2^MAX_HALVINGS)
+MAX_HALVINGS = 20  # the step is refused below T / (N0 2^MAX_HALVINGS)
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,7 @@ class StepChoice:
     profile: np.ndarray  # the time error at k on those levels
     growth: float  # the indicator's largest level over its level 0 (the first pilot)
     largest_t: float  # the time of that level
+    pilot: PilotRun | None = None  # the run at k0 (the ingredients' changes are measured against it)
 
 
 def norms(model: Model, comm: MPI.Comm) -> tuple[Callable[[np.ndarray], float], Callable[[np.ndarray], float]]:
@@ -104,7 +105,8 @@ def time_estimate(runs: list[PilotRun], order: int, comm: MPI.Comm) -> TimeEstim
 def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
                 log: Callable[[str], None]) -> StepChoice:
     """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
-    T / (N0 2^j) whose time error is within SAFETY times ``share``. ``tol`` names the tolerance in a refusal."""
+    T / n (n at least the pilots' coarsest T / k0) whose time error is within SAFETY times ``share``. ``tol`` names
+    the tolerance in a refusal."""
     k0 = pilot.time.T / N0
     for _ in range(START_HALVINGS):
         try:
@@ -122,11 +124,16 @@ def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share:
     growth = float(indicator[largest] / indicator[0]) if indicator[0] > 0 else math.inf
     log(f"start mesh: time error of k = {k0 / 4:g}: {e_k4:.3e} (order {p:.2f}); eta grows x{growth:.3g} "
         f"over the run")
-    j, k4 = 0, k0 / 4
-    while e_k4 > 0 and e_k4 * ((k0 / 2**j) / k4) ** p > SAFETY * share:
-        j += 1
-        if j > MAX_HALVINGS:
+    k4 = k0 / 4
+    k = k0
+    if e_k4 > 0:
+        # the largest step T / n (n >= T / k0) whose extrapolated error is within SAFETY times the share
+        k_max = k4 * (SAFETY * share / e_k4) ** (1.0 / p)
+        n0 = round(pilot.time.T / k0)
+        n = max(n0, math.ceil(pilot.time.T / k_max * (1.0 - 1e-12)))
+        if n > n0 * 2**MAX_HALVINGS:
             raise ToleranceError(tol, e_k4, 0, "time.k")
-    k = k0 / 2**j
+        k = pilot.time.T / n
     scale = (k / k4) ** p if e_k4 > 0 else 0.0
-    return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest])
+    return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest],
+                      pilots[0])

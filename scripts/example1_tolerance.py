@@ -1,0 +1,102 @@
+"""Example 1 at --tolerance 1e-4: where the command's time goes, and the error it achieves.
+
+1. ``python -m solver run configs/example1.toml --tolerance TOL`` run ROUNDS times, alternated with
+   ``python -c 'import solver.cli'`` (the import alone): wall seconds of each, the planning's seconds and its stages
+   (plan.json) and the run's loop (the CLI's "done in"); median and range.
+2. The achieved error: the plan's run against a reference (a P2 tolerance run at REF_TOL with a 4x smaller step,
+   studies/tolerance.py's Reference.planned; its own error bounded by its estimate, and measured against a second
+   reference at 3 REF_TOL).
+Writes benchmarks/results/example1_tolerance.md (the machine is shared: compare the figures with each other).
+
+    python scripts/example1_tolerance.py [--tol 1e-4] [--rounds 3] [--ref-tol 2e-5] [--no-error]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+
+def timed(cmd: list[str]) -> tuple[float, str]:
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=True)
+    return time.perf_counter() - t0, out.stdout + out.stderr
+
+
+def spread(xs: list[float]) -> str:
+    return f"{statistics.median(xs):.2f} ({min(xs):.2f}-{max(xs):.2f})"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--tol", type=float, default=1e-4)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--ref-tol", type=float, default=2e-5)
+    ap.add_argument("--no-error", action="store_true")
+    ap.add_argument("--output", default=str(ROOT / "benchmarks" / "results" / "example1_tolerance.md"))
+    args = ap.parse_args()
+    py = sys.executable
+    cmd = f"python -m solver run configs/example1.toml --tolerance {args.tol:g}"
+    whole, imports, planning, loop, stages = [], [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(args.rounds):
+            s, _ = timed([py, "-c", "import solver.cli"])
+            imports.append(s)
+            s, text = timed([py, "-m", "solver", "run", "configs/example1.toml", "--tolerance", f"{args.tol:g}",
+                             "--output", tmp, "--overwrite", "--no-progress", "--set", "output.xdmf=false"])
+            whole.append(s)
+            plan = json.loads((Path(tmp) / "plan.json").read_text())
+            planning.append(plan["planning_seconds"])
+            stages.append(plan["planning_stages"])
+            # the CLI's "done in" counts from before the planning: the run is what it adds
+            loop.append(float(re.search(r"done in ([0-9.]+) s", text).group(1)) - planning[-1])
+            print(f"import {imports[-1]:.2f} s, command {whole[-1]:.2f} s, planning {planning[-1]:.2f} s, "
+                  f"run {loop[-1]:.2f} s", flush=True)
+    ratio = [p / r for p, r in zip(planning, loop)]
+    lines = [f"# Example 1 at `--tolerance {args.tol:g}` (`python scripts/example1_tolerance.py`)", "",
+             f"{args.rounds} rounds, alternated with the import alone; median (range), seconds of wall time on a shared "
+             "2-core machine (loaded: compare the figures with each other).", "",
+             "| what | seconds |", "|---|---|",
+             f"| `{cmd}` (whole command) | {spread(whole)} |",
+             f"| `python -c 'import solver.cli'` | {spread(imports)} |",
+             f"| planning (plan.json) | {spread(planning)} |",
+             f"| the run it chose (the CLI's \"done in\" less the planning: the model's build and the loop) "
+             f"| {spread(loop)} |",
+             f"| planning / run | {spread(ratio)} |", "",
+             "Planning stages (last round): " + ", ".join(f"{k} {v:.2f} s" for k, v in stages[-1].items()), "",
+             f"Plan: P{plan['u_degree']}, order {plan['order']}, k = {plan['k']:g}, {plan['cells']} cells; estimate "
+             f"{sum(plan['estimate'].values()):.3e} ({', '.join(f'{k} {v:.2e}' for k, v in plan['estimate'].items())});"
+             f" C = {plan['C']:.3g} (calibration: {plan['calibration']})."]
+    if not args.no_error:
+        from mpi4py import MPI  # noqa: F401
+
+        from studies.tolerance import Reference, scene, tolerance_run
+
+        cfg = scene("example1")
+        ref = Reference.planned(cfg, args.ref_tol, 4)
+        second = Reference.planned(cfg, 3 * args.ref_tol, 4)
+        check = ref.measure(second.build())
+        rec = tolerance_run(ref, cfg, args.tol)
+        lines += ["", f"Achieved error at TOL {args.tol:g}: **{rec['error']:.3e}** ({rec['error'] / args.tol:.2f} TOL; "
+                  f"u {rec['error_u']:.2e}, zeta {rec['error_zeta']:.2e}, largest at t = {rec['t_max']:g}); the plan's "
+                  f"estimate {rec['estimate']:.3e}.",
+                  f"Reference: a P2 tolerance run at {args.ref_tol:g} with a 4x smaller step ({ref.cells} cells, "
+                  f"{ref.dofs} dofs, k = {ref.k:g}, {ref.seconds:.0f} s); its estimate {ref.estimate:.2e} bounds its own "
+                  f"error; a second reference at {3 * args.ref_tol:g} differs from it by {check['error']:.2e}."]
+    Path(args.output).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
