@@ -11,9 +11,10 @@ solve:
   at nodes clipped to zeta*;
 - to u: ||eps(du)|| <= ||dM|| / (2 mu_L) (A's smallest eigenvalue; the contact term only stiffens), and a damage
   error dzeta that lasts to T moves M by at most sum|c_i| ||Phi_L(A eps(u_n))||_inf (T - t_n) ||dzeta||.
-A kink of u (a contact point that opens or closes) is no error of the state, and costs no step. A step is accepted
-when its error per unit step is within SHARE of the tolerance, est <= SHARE tolerance k / T, else the state is
-put back and the step retried smaller. The next step follows Söderlind's PI controller (PI.4.2, PETSc's TSAdapt
+A kink of u (a contact point that opens or closes) is no error of the state, and costs no step. The local errors
+are accumulated as fields and a step's error is the growth of the accumulated error's norm; a step is accepted
+when it is within an equal quantum per step (:meth:`StepController._ratio`), else the state is put back and the
+step retried smaller. The next step follows Söderlind's PI controller (PI.4.2, PETSc's TSAdapt
 DSP default). Steps land on every kink of a load table, on ``output.times`` and on T; a step over which the
 contact zone changes by more than ACTIVE_FRACTION of Γ_C does not let the next one grow. The controller's state
 (the step history, the PI memory and the state's past values the estimate differences) goes into checkpoints,
