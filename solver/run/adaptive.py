@@ -9,8 +9,8 @@ solve:
   extrapolated trapezoid's, from the miss of H_n by the extrapolation of H_{n-1}, H_{n-2});
 - damage: the explicit source's error over the step, (k/2)(phi_n - phi_{n-1}) at the nodes (order 2: AB2's), zero
   at nodes clipped to zeta*;
-- to u: ||eps(du)|| <= ||dM|| / (2 mu_L) (A's smallest eigenvalue; the contact term only stiffens), and a damage
-  error dzeta that lasts to T moves M by at most sum|c_i| ||Phi_L(A eps(u_n))||_inf (T - t_n) ||dzeta||.
+- accumulated as fields, the damage error moving M over each step by k g(0) E_zeta Phi_L(A eps(u_n)), and carried
+  to u by ||eps(du)|| <= ||dM|| / (2 mu_L) (A's smallest eigenvalue; the contact term only stiffens).
 A kink of u (a contact point that opens or closes) is no error of the state, and costs no step. The local errors
 are accumulated as fields and a step's error is the growth of the accumulated error's norm; a step is accepted
 when it is within an equal quantum per step (:meth:`StepController._ratio`), else the state is put back and the
