@@ -58,7 +58,7 @@ MEANING: dict[str, str] = {
     "time.T": "final time",
     "time.k": "time step (must divide T); with time.adaptive the first step",
     "time.adaptive": "choose the steps during the run for time.tolerance (docs/model.md §3.9)",
-    "time.tolerance": "adaptive steps: target of the time error in the paper's norm (local errors per unit step)",
+    "time.tolerance": "adaptive steps: target of the time error in the paper's norm (an equal error per step, docs/model.md §3.9)",
     "time.k_min": "adaptive steps: the smallest step (0: T 1e-9)",
     "time.k_max": "adaptive steps: the largest step (0: T)",
     "time.order": "1: the paper's scheme; 2: the second-order one (CN-AB2 damage, trapezoidal memory)",

@@ -62,7 +62,7 @@ class _Field:
 
 def _fields(model, clock=None) -> dict[str, _Field]:
     """Everything a checkpoint holds, each with its dof coordinates and how to write it back (``clock``: an
-    adaptive run's step controller, whose past levels are u- and zeta-shaped arrays)."""
+    adaptive run's step controller, whose past values are zeta- and memory-shaped arrays)."""
     V = model.u.function_space
     nv = V.dofmap.index_map.size_local
     cv = V.tabulate_dof_coordinates()
@@ -85,10 +85,6 @@ def _fields(model, clock=None) -> dict[str, _Field]:
         z = model.damage.zeta.x.array
         nz = Z.dofmap.index_map.size_local
         out["zeta"] = _Field(cz, z.reshape(len(cz), 1), nz, setter(z))
-    if clock is not None:
-        for name, (space, a) in clock.arrays().items():
-            c, n = (cv, nv) if space == "u" else (cz, nz)
-            out[f"clock/{name}"] = _Field(c, a.reshape(len(c), -1), n, setter(a))
     if model.damage is not None:
         for k, v in model.damage.state().items():  # owned parts of PETSc vectors
             out[f"damage/{k}"] = _Field(cz[:nz], v.reshape(nz, 1), nz,
@@ -99,6 +95,11 @@ def _fields(model, clock=None) -> dict[str, _Field]:
         gdim = model.geo.mesh.geometry.dim
         cq = rule.evaluator(ufl.SpatialCoordinate(model.geo.mesh), rule.space((gdim,)))().reshape(-1, gdim)
         nq = Q.dofmap.index_map.size_local
+    if clock is not None:
+        for name, (space, a) in clock.arrays().items():
+            c, n = {"u": (cv, nv), "zeta": (cz, nz), "memory": (cq, nq)}[space]
+            out[f"clock/{name}"] = _Field(c, a.reshape(len(c), -1), n, setter(a))
+    if model.history is not None:
         for k, v in model.history.state().items():
             out[f"history/{k}"] = _Field(cq, v.reshape(len(cq), -1), nq, setter(v))
     return out
