@@ -81,6 +81,9 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> MemoryConfig:
     if scene["time"].adaptive and kernel in ("tabulated", "power"):
         raise ctx.fail("memory.kernel", kernel, "adaptive steps (time.adaptive) need a constant or exponential kernel "
                        "(a fitted kernel's error is checked at the lags of uniform steps)")
+    if order == 1 and rule == "trapezoid_extrapolated" and kernel != "none":
+        raise ctx.fail("memory.rule", rule, "the extrapolated trapezoid is time.order = 2's rule (its current term is taken "
+                       "at u extrapolated from two past levels): with time.order = 1 use 'left' or 'trapezoid'")
     if order == 2 and rule == "left" and kernel != "none":
         raise ctx.fail("memory.rule", rule, "time.order = 2 needs a second-order rule: trapezoid or trapezoid_extrapolated")
     L = number(ctx, "memory.L", t.get("L", d.L))

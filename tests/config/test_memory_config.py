@@ -44,6 +44,7 @@ def test_keys_of_other_kernels_are_left_out_of_the_written_scene():
     ({"kernel": "constant", "kernel_tolerance": 1e-6}, "memory.kernel_tolerance", "not used"),
     ({"kernel": "exponential", "weights": [1.0], "times": [1.0], "exponent": 0.5}, "memory.exponent", "not used"),
     ({"kernel": "tabulated", "table": [[0, 1.0], [0.5, -1.0], [1, 1.0]]}, "memory.kernel_tolerance", "one sign"),
+    ({"kernel": "constant", "rule": "trapezoid_extrapolated"}, "memory.rule", "time.order = 2's rule"),
 ])
 def test_refusals_name_the_key(memory, key, says):
     with pytest.raises(ConfigError) as err:
