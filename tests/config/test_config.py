@@ -359,9 +359,9 @@ def test_replace_applies_the_checks_across_sections():
     with pytest.raises(ConfigError) as err:  # [memory] reads [time]
         cfg.replace({"time": {"order": 2}, "memory": {"rule": "left"}})
     assert err.value.key == "memory.rule"
-    with pytest.raises(ConfigError) as err:  # [accuracy] reads the mesh's dimension
-        load(ROOT / "configs/example1_3d.toml").replace({"accuracy": {"tolerance": 1e-2}})
-    assert err.value.key == "accuracy.tolerance"
+    with pytest.raises(ConfigError) as err:  # [memory] reads time.adaptive
+        cfg.replace({"time": {"adaptive": True}, "memory": {"kernel": "power"}})
+    assert err.value.key == "memory.kernel"
 
 
 def test_replace_without_a_document_uses_the_resolved_scene():
