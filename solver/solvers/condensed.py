@@ -161,7 +161,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         name = REASONS_SNES.get(out.reason, str(out.reason))
         return self.energy.finish(out, name, scale)
 
-    def _kept(self, u: PETSc.Vec, solved, it: int) -> bool:
+    def _kept(self, u: PETSc.Vec, solved) -> bool:
         """Whether u, the end of a step through K, keeps the active set the step was solved on (``solved``: the
         step's set and piece): then u solves that set's linear equations, the level's to round-off."""
         key, step_piece = solved
@@ -185,13 +185,12 @@ class CondensedNewtonSolver(DisplacementMethod):
         """u += d, the full Newton step -J(u)^{-1} F(u) solved through K: d_B = -(I + S C)^{-1} P K^{-1} F on
         the contact dofs, d = -K^{-1} (F + P^T C d_B) elsewhere. Returns |d| and the active set the step solved
         (:meth:`_set_at`'s form). Two solves with K. ``piece``: (C_BB,
-        dj_B) of the quadratic piece the reduced iteration ended on, the step then solving that piece (F + P^T dj_B
-        is its residual); default: Newton's step, C assembled at u."""
+        dj_B, the points' states) of the quadratic piece the reduced iteration ended on, the step then solving that
+        piece (F + P^T dj_B is its residual); default: Newton's step, C assembled at u."""
         problem, dofs, cond = self.problem, self.dofs, self.cond
         if piece is not None:
-            C, dj = piece[0], piece[1]
+            C, dj, key = piece
             F.array[dofs.local] += dofs.mine(dj)
-            key = piece[2]
         else:
             assemble_without_diagonal(problem.contact.C, problem.contact.jacobian_form, problem.contact.bcs)
             C = contact_block(problem.contact.C, dofs, u.getOwnershipRange()[0])
@@ -231,7 +230,7 @@ class CondensedNewtonSolver(DisplacementMethod):
                 keep, keep_norm = u.copy(), out.history[-1]
                 out.reason = R.ITERATING
             if (out.reason == R.ITERATING and solved is not None and self.test.near_floor(out.history[-1])
-                    and self._kept(u, solved, it)):
+                    and self._kept(u, solved)):
                 out.reason = CONVERGED_SET
             if out.reason != R.ITERATING:
                 break
