@@ -24,7 +24,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import ufl
 from dolfinx import fem
 
 from solver.config import MaterialConfig, OutputConfig
@@ -33,7 +32,7 @@ from solver.io.contact_series import ContactSeries
 from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
 from solver.laws.memory import pairs
 from solver.physics.material import lame, von_mises_array
-from solver.physics.memory_source import StrainMap
+from solver.physics.memory_source import StrainMap, strain_table
 
 KINDS = {"displacement": ("Node", "Vector"), "damage": ("Node", "Scalar"), "stress": ("Cell", "Tensor6"),
          "elastic_stress": ("Cell", "Tensor6"), "von_mises": ("Cell", "Scalar"), "von_mises_elastic": ("Cell", "Scalar"),
@@ -273,18 +272,9 @@ class Outputs:
 def _centroid_strains(u: fem.Function, n_cells: int) -> StrainMap:
     """eps(u)'s independent components at the centroids of the first ``n_cells`` local cells (their averages for a
     P1 or P2 u on affine cells), as a table of the scalar basis gradients there."""
-    mesh = u.function_space.mesh
-    d = mesh.geometry.dim
-    V = u.function_space
-    S = fem.FunctionSpace(mesh, V.ufl_element().sub_elements()[0])
-    ndofs = S.dofmap.dof_layout.num_dofs
+    d = u.function_space.mesh.geometry.dim
     cells = np.arange(n_cells, dtype=np.int32)
-    centroid = np.full((1, d), 1.0 / (d + 1))
-    # a scalar trial function: a vector one in an Expression corrupts memory in dolfinx 0.5.2
-    grad = fem.Expression(ufl.grad(ufl.TrialFunction(S)), centroid).eval(cells).reshape(n_cells, 1, d, ndofs)
-    nodes = V.dofmap.list.array.reshape(-1, ndofs)[:n_cells]
-    bs = V.dofmap.index_map_bs
-    size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+    grad, nodes, bs, size_v = strain_table(u, np.full((1, d), 1.0 / (d + 1)), cells)
     return StrainMap(grad, nodes, bs, cells[:, None], n_cells, size_v, pairs(d))
 
 

@@ -128,6 +128,20 @@ class _Transposed:
         return self.E.transpose_product(m)
 
 
+def strain_table(u: fem.Function, points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """What eps(u) at ``points`` (reference coordinates) of ``cells`` is made from: the scalar basis gradients there
+    (cell, point, j, a), u's node of each element node (cell, a), u's block size and its local array's length (a
+    vector trial function in an Expression corrupts memory in dolfinx 0.5.2: a scalar one, S and V sharing the
+    element's local order). :class:`MemorySource` and the written cell stresses read their strains from it."""
+    V = u.function_space
+    S = fem.FunctionSpace(V.mesh, V.ufl_element().sub_elements()[0])
+    ndofs = S.dofmap.dof_layout.num_dofs
+    grad = fem.Expression(ufl.grad(ufl.TrialFunction(S)), points).eval(cells).reshape(len(cells), len(points), -1, ndofs)
+    nodes = V.dofmap.list.array.reshape(-1, ndofs)[: len(cells)]
+    bs = V.dofmap.index_map_bs
+    return grad, nodes, bs, (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+
+
 class MemorySource:
     """H = zeta Phi_L(A eps(u)) at the rule's points, as one product with E and a few numpy passes.
 
@@ -170,14 +184,8 @@ class MemorySource:
         def nodes_of(space) -> np.ndarray:
             return space.dofmap.list.array.reshape(-1, space.dofmap.dof_layout.num_dofs)[: len(cells)]
 
-        # eps_ij = (d_j u_i + d_i u_j) / 2 from scalar P1 gradients (a vector trial function in an
-        # Expression corrupts memory in dolfinx 0.5.2); columns are u's blocked array indices
-        V = u.function_space
-        S = fem.FunctionSpace(rule.mesh, V.ufl_element().sub_elements()[0])
-        grad = tabulate(ufl.grad(ufl.TrialFunction(S)), S)  # (cell, point, j, a)
-        nodes = nodes_of(V)  # (cell, a): element node a -> u's node (S and V share the element's local order)
-        bs = V.dofmap.index_map_bs
-        size_v = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * bs
+        # eps_ij = (d_j u_i + d_i u_j) / 2 from the scalar basis gradients; columns are u's blocked array indices
+        grad, nodes, bs, size_v = strain_table(u, rule.points, cells)
         self.pairs = pairs(d)
         if d == 3:  # the table, not the matrix (StrainMap: a quarter of its memory)
             self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
