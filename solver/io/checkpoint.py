@@ -184,8 +184,13 @@ def read(directory: Path, model, clock=None) -> Checkpoint:
     with h5py.File(path, "r") as h5:
         a = dict(h5.attrs)
         if a["scene"] != scene_hash(model.cfg):
-            raise ConfigError(f"--restart: the scene differs from the one that wrote {path} (only [output] may change)")
+            raise ConfigError(f"--restart: the scene differs from the one that wrote {path} (only [output] may change), "
+                              "or another version of the solver wrote it")
         fields, loaded, ok = _fields(model, clock), {}, True
+        missing = [name for name in fields if f"{name}/coords" not in h5]
+        if missing:
+            raise ConfigError(f"--restart: {path} lacks {', '.join(missing)} (written by another version of the "
+                              "solver?); start the run again without --restart")
         for name, f in fields.items():
             ref = _keys(h5[f"{name}/coords"][...])
             mine = _keys(f.coords)
@@ -196,11 +201,16 @@ def read(directory: Path, model, clock=None) -> Checkpoint:
             raise ConfigError(f"--restart: the mesh differs from the one in {path}")
         for name, f in fields.items():
             f.assign(h5[f"{name}/values"][...][loaded[name]])
-    model.mech.restore_scalars({k.removeprefix("mech_"): v for k, v in a.items() if k.startswith("mech_")})
-    if model.damage is not None:
-        model.damage.restore_scalars({k.removeprefix("damage_"): v for k, v in a.items() if k.startswith("damage_")})
-    if clock is not None:
-        clock.restore_scalars({k.removeprefix("clock_"): float(v) for k, v in a.items() if k.startswith("clock_")})
+    try:
+        model.mech.restore_scalars({k.removeprefix("mech_"): v for k, v in a.items() if k.startswith("mech_")})
+        if model.damage is not None:
+            model.damage.restore_scalars({k.removeprefix("damage_"): v for k, v in a.items()
+                                          if k.startswith("damage_")})
+        if clock is not None:
+            clock.restore_scalars({k.removeprefix("clock_"): float(v) for k, v in a.items() if k.startswith("clock_")})
+    except KeyError as e:
+        raise ConfigError(f"--restart: {path} lacks the value {e.args[0]} (written by another version of the "
+                          "solver?); start the run again without --restart") from None
     if model.u_prev is not None:
         model.u_prev.x.scatter_forward()
     model.u.x.scatter_forward()
