@@ -12,6 +12,8 @@ from solver.errors import (
     UsageError,
 )
 
+pytestmark = pytest.mark.serial  # no MPI here: on 2 ranks each would run the same checks again
+
 
 def test_config_error_composes_its_message_from_fields():
     err = ConfigError(source="s.toml", key="mesh.nx", value=0, allowed="must be at least 1")

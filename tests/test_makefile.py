@@ -3,7 +3,10 @@
 
 import re
 
+import pytest
 from conftest import ROOT
+
+pytestmark = pytest.mark.serial  # no MPI here: on 2 ranks each would run the same checks again
 
 
 def test_the_portable_tests_exist():

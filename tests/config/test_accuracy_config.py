@@ -6,6 +6,8 @@ from conftest import ROOT
 from solver.config import load
 from solver.errors import ConfigError
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 SCENE = ROOT / "configs/example1.toml"
 
 

@@ -6,6 +6,8 @@ from conftest import ROOT
 
 from solver.config import SECTIONS, Config, ConfigError, apply_overrides, dumps, from_dict, load, to_dict
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 
 def test_defaults_are_example1():
     cfg = from_dict({})

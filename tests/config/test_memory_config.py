@@ -4,6 +4,8 @@ import pytest
 
 from solver.config import ConfigError, dumps, from_dict, load, to_dict
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 TIME = {"T": 1.0, "k": 0.001}
 
 

@@ -8,6 +8,8 @@ from conftest import ROOT
 from solver.config import boundary, reference
 from solver.config.scene import SECTIONS
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 
 def test_every_config_field_has_a_line():
     """A field added to a section's dataclass without a MEANING line (or a line left for a removed key) fails here."""

@@ -12,6 +12,8 @@ from solver.config.tables import DataTable, write_copy
 from solver.config.tomlread import BIG
 from solver.config.tomlread import loads as fast_loads
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 LEFT = {"role": "clamped"}
 
 

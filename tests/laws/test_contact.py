@@ -15,6 +15,8 @@ from solver.config.boundary import to_toml
 from solver.errors import ConfigError
 from solver.laws.contact import CONTACT_LAWS, ContactLaw, PiecewiseLinearLaw, PointLaws
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 EPS = np.finfo(float).eps
 LAW_CLASSES = list(CONTACT_LAWS.values())
 _DOMAIN = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.interval, 1))

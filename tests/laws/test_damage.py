@@ -9,6 +9,8 @@ from solver.config import DamageConfig, from_dict
 from solver.errors import ConfigError
 from solver.laws.damage import FremondSource, eta, psi
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 ULP = np.finfo(float).eps
 # the same operations in the same order, but for eps : eps, which UFL and einsum may sum in another order
 # (relative error <= d^2 u of the sum); the result's size bounds the rest

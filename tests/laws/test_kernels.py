@@ -17,6 +17,8 @@ from solver.laws.kernels import (
     run_lags,
 )
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 
 def rel(exact, approx):
     return np.max(np.abs(approx - exact) / np.abs(exact))

@@ -8,6 +8,8 @@ import ufl
 from solver.errors import ConfigError
 from solver.laws.memory import MemoryIntegrand, pairs, truncate
 
+pytestmark = pytest.mark.serial  # no MPI in this layer: on 2 ranks each would run the same checks again
+
 E, NU = 100.0, 0.3
 ULP = np.finfo(float).eps
 # the two forms do the same operations up to the order of the commutative sum lambda tr(eps) + 2 mu eps_ij and

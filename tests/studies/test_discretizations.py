@@ -6,6 +6,8 @@ import pytest
 
 from studies.discretizations import SERIES, orders_markdown, slope
 
+pytestmark = pytest.mark.serial  # no MPI here: on 2 ranks each would run the same checks again
+
 
 def test_slope_of_a_power_law_and_of_too_few_points():
     assert slope([1, 2, 4], [3, 12, 48]) == pytest.approx(2.0)

@@ -4,9 +4,12 @@ about 1.2e-05 with P2's C, 1.2e-05 with P2's" (a hard-coded 1.6e-3 for the secon
 import json
 import re
 
+import pytest
 from conftest import ROOT
 
 from studies.estimator import markdown
+
+pytestmark = pytest.mark.serial  # no MPI here: on 2 ranks each would run the same checks again
 
 
 def test_the_reference_sentence_says_what_its_own_error_is_and_against_what():
