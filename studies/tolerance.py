@@ -398,6 +398,11 @@ def run_study(scenes: list[str], tols, out: Path, ref_tol: float, levels: int, s
             rec["uniform_best"] = None if best is None else {key: best[key] for key in
                                                             ("degree", "order", "mesh", "k", "error", "cost", "dofs")}
             runs.append(rec)
+            result["scenes"][name] = {  # written after every tolerance: a long study keeps what it measured
+                "reference": {**spec, "cells": ref.cells, "dofs": ref.dofs, "k": ref.k, "estimate": ref.estimate,
+                              "seconds": ref.seconds, "second_vs_first": ref_check["error"]},
+                "runs": runs, "uniform": uniform_rows}
+            _write(result, out)
         result["scenes"][name] = {
             "reference": {**spec, "cells": ref.cells, "dofs": ref.dofs, "k": ref.k, "estimate": ref.estimate,
                           "seconds": ref.seconds, "second_vs_first": ref_check["error"]},

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from mpi4py import MPI
 
 from solver.config import Config
 from solver.mesh.geometry import Geometry
@@ -74,6 +75,19 @@ class Plan:
     stages: dict = field(default_factory=dict)  # seconds per stage of the planning
     calibration: object = None  # the estimator constant's calibration on the scene (calibration.Calibration), or None
     ingredients: tuple = ()  # each optional ingredient's change of the answer (ingredients.Ingredient)
+    # the displacement of the last t = 0 solve on ``geo`` at ``degree`` (this process's array, ghosts included), the
+    # run's level-0 Newton start (:meth:`warm_start`); None where the mesh was fitted to a later level
+    level0_u: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def warm_start(self, model) -> bool:
+        """Start ``model``'s level-0 Newton (the run's, built on ``geo`` at ``degree``: the same space, so the same
+        dof layout) from the planner's last t = 0 solution, which solved that very problem; False (nothing set)
+        where there is none or the sizes differ on any process. Collective."""
+        ok = self.level0_u is not None and model.u.x.array.size == self.level0_u.size and model.geo is self.geo
+        if not model.geo.comm.allreduce(ok, op=MPI.LAND):
+            return False
+        model.u.x.array[:] = self.level0_u
+        return True
 
     @property
     def changes(self) -> dict:
