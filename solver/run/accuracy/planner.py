@@ -433,13 +433,16 @@ class Planner:
                 target = target if new is None else new
                 if seq[-1].estimate <= target:
                     return marked
+            round_started = time.perf_counter()
             geo = refined(*marked)
+        else:
+            round_started = time.perf_counter()
         solved = 0
         while True:
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
             rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, self.C[degree] * lv.indicator,
-                             geo=lv.model.geo)
+                             geo=lv.model.geo, seconds=time.perf_counter() - round_started)
             seq.append(rec)
             solved += 1
             self.log(f"  P{degree}: {rec.cells} cells, {rec.dofs} dofs, C eta = {rec.estimate:.3e} "
@@ -452,6 +455,7 @@ class Planner:
                 return lv.model.geo, lv.cell_indicators
             if rec.dofs > self.setup.max_dofs:
                 raise ToleranceError(self.setup.tol, rec.estimate, rec.dofs, self.setup.limit, target=target)
+            round_started = time.perf_counter()
             geo = refined(lv.model.geo, lv.cell_indicators)
 
 

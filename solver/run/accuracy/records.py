@@ -44,13 +44,16 @@ class MeshRecord:
     estimate: float  # C times ``indicator``
     uniform: bool = False  # a uniform refinement (for the damage's part), not a Dörfler step
     geo: Geometry | None = None  # the mesh of a Dörfler step (zeta's nested chain is drawn from them)
+    seconds: float = 0.0  # the round's wall time: the refinement that made the mesh, its solve and estimate
 
     def summary(self) -> dict:
-        """The record as plan.json writes it."""
+        """The record as plan.json writes it (``seconds`` where measured)."""
         out = {"degree": self.degree, "cells": self.cells, "dofs": self.dofs, "eta": self.indicator,
                "estimate": self.estimate}
         if self.uniform:
             out["uniform"] = True
+        if self.seconds:
+            out["seconds"] = self.seconds
         return out
 
 
