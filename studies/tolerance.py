@@ -497,6 +497,11 @@ def _write(result: dict, out: Path) -> None:
     (out / "tolerance.md").write_text(markdown(result, rows, unreached))
 
 
+def _swept(result: dict) -> bool:
+    """Whether the study ran the uniform sweep (False: --no-sweep): some scene has its rows or a run its best."""
+    return any(sc.get("uniform") or any(r.get("uniform_best") for r in sc["runs"]) for sc in result["scenes"].values())
+
+
 def _mesh_label(mesh: dict) -> str:
     """A verified uniform run's mesh as the table names it: n = cells across a rectangle's sides, or r = uniform
     refinements of a gmsh mesh."""
@@ -551,7 +556,7 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
              "| scene | TOL | achieved error | error / TOL | reference's own error / TOL | estimate | chosen | cost (s) "
              "| cheapest uniform meeting TOL | its cost (s) | cost / uniform | loop / uniform |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    swept = any(sc.get("uniform") for sc in result["scenes"].values())  # --no-sweep: no uniform sweep was run
+    swept = _swept(result)
     for r in rows:
         own = r.get("ref_error_over_tol")
         uni = (f"P{r['uniform_degree']} o{r['uniform_order']} {r['uniform_mesh']} k={r['uniform_k']:g} "
@@ -605,7 +610,7 @@ def chart(result: dict, out: Path) -> None:
     if plt is None:
         return
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
-    swept = any(sc.get("uniform") for sc in result["scenes"].values())
+    swept = _swept(result)
     for name, sc in result["scenes"].items():
         done = [r for r in sc["runs"] if "error" in r]
         if not done:
