@@ -74,6 +74,10 @@ def main() -> int:
              f"| {spread(loop)} |",
              f"| planning / run | {spread(ratio)} |", "",
              "Planning stages (last round): " + ", ".join(f"{k} {v:.2f} s" for k, v in stages[-1].items()), "",
+             "Its solves on adapted meshes (P degree, cells: seconds of the refinement, the solve and the estimate; "
+             "the degree's choice, the calibration and zeta's runs are their own stages): "
+             + ", ".join(f"P{r['degree']} {r['cells']}: {r['seconds']:.2f} s" for r in plan["adaptation"]
+                         if "seconds" in r), "",
              f"Plan: P{plan['u_degree']}, order {plan['order']}, k = {plan['k']:g}, {plan['cells']} cells; estimate "
              f"{sum(plan['estimate'].values()):.3e} ({', '.join(f'{k} {v:.2e}' for k, v in plan['estimate'].items())});"
              f" C = {plan['C']:.3g} (calibration: {plan['calibration']})."]

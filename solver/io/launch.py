@@ -98,6 +98,8 @@ def _planned(cfg: Config, comm: MPI.Comm, outdir: Path | None, overwrite: bool, 
     if restart:
         same_scene(comm, cfg, outdir)
     model = build_model(cfg, comm, plan.geo)
+    if not restart:
+        plan.warm_start(model)  # level 0 is the planner's last t = 0 problem: Newton starts at its solution
     sensors = (ErrorSensor(model, plan),)
     if outdir is not None:
         write_plan(comm, outdir, plan, model)

@@ -18,6 +18,7 @@ import numpy as np
 import ufl
 from dolfinx import cpp
 from dolfinx import mesh as dmesh
+from mpi4py import MPI
 
 from solver.mesh.geometry import Geometry, equispaced
 
@@ -91,3 +92,27 @@ def refine_uniformly(geo: Geometry) -> Geometry:
     Collective."""
     mesh = geo.mesh
     return refine(geo, np.arange(mesh.topology.index_map(mesh.topology.dim).size_local))
+
+
+def refine_twice(geo: Geometry, cells: np.ndarray) -> Geometry:
+    """The mesh with the given local cells refined, then every cell of the refined mesh that lies inside one of them
+    refined again (h quartered there; Plaza's closure in between), boundary parts kept. Collective."""
+    from dolfinx import fem
+
+    from solver.mesh.transfer import locate
+
+    finer = refine(geo, cells)
+    tdim = finer.mesh.topology.dim
+    marked = fem.Function(fem.FunctionSpace(geo.mesh, ("DG", 0)))  # the marks on the ghost cells too
+    marked.x.array[:] = 0.0
+    marked.x.array[np.asarray(cells, dtype=np.int32)] = 1.0
+    marked.x.scatter_forward()
+    n = finer.mesh.topology.index_map(tdim).size_local
+    mid = dmesh.compute_midpoints(finer.mesh, tdim, np.arange(n, dtype=np.int32))[:, :tdim]
+    try:
+        inside = marked.x.array[locate(geo.mesh, mid)[0]] > 0.5 if n else np.zeros(0, dtype=bool)
+    except ValueError:  # a child off its parent's process: the second refinement is left out on every process
+        inside = None
+    if not geo.comm.allreduce(inside is not None, op=MPI.LAND):
+        return finer
+    return refine(finer, np.flatnonzero(inside))

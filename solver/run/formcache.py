@@ -32,7 +32,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+import ffcx
 import ffcx.codegeneration.jit as ffcx_jit
+import ffcx.parameters
 
 _disk_lookup = ffcx_jit.get_cached_module
 _found: dict[tuple, tuple] = {}
@@ -145,11 +147,31 @@ def _stderr_held():
                 sys.stderr.write(fh.read().decode(errors="replace"))
 
 
+_merge = ffcx.parameters.get_parameters
+_merged: dict[tuple, dict] = {}
+
+
+def _parameters(priority_parameters: dict | None = None) -> dict:
+    """FFCx's ``get_parameters`` (a copy of the merged values), kept per ``priority_parameters``: FFCx formats the
+    whole merged table with ``pprint`` for an INFO record on every call, whatever the log level, three times per
+    ``fem.form`` (a fifth of a small tolerance plan's time went there). The files it merges are read once per
+    process by FFCx itself, so the values are the same on every call."""
+    key = tuple(sorted((k, repr(v)) for k, v in (priority_parameters or {}).items()))
+    hit = _merged.get(key)
+    if hit is None:
+        hit = _merged[key] = _merge(priority_parameters)
+    else:
+        ffcx.parameters.logger.setLevel(hit["verbosity"])  # what FFCx's call also does
+    return dict(hit)
+
+
 def install() -> None:
     """Put the memo in front of FFCx's lookup and loader, and the quiet compile (once per process; idempotent)."""
     ffcx_jit.get_cached_module = _lookup
     ffcx_jit._load_objects = _loaded
     ffcx_jit._compile_objects = _compile_quietly
+    ffcx.parameters.get_parameters = _parameters
+    ffcx.get_parameters = _parameters
 
 
 def kept() -> int:

@@ -156,3 +156,23 @@ def test_3d_refinement_of_an_unstructured_mesh_is_the_same_on_2_ranks(comm):
         return refine(geo, np.flatnonzero(mid[:, 2] < 0.3)).num_cells()
 
     assert refined(comm) == refined(MPI.COMM_SELF)
+
+
+def test_refining_twice_quarters_h_in_the_marked_cells_and_keeps_every_part(comm):
+    """refine_twice: the marked cells' children refined again (16 grandchildren of area 1/16 each), the parts kept."""
+    from solver.mesh.adapt import refine_twice
+
+    cfg = load(ROOT / "configs/example1.toml").replace({"mesh": {"nx": 4, "ny": 4}})
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    mid = geo.mesh.geometry.x[geo.mesh.geometry.dofmap.array.reshape(-1, 3)].mean(axis=1)
+    n = geo.mesh.topology.index_map(2).size_local
+    corner = np.flatnonzero((mid[:n, 0] < 0.25) & (mid[:n, 1] < 0.25))  # the two cells at the origin
+    twice = refine_twice(geo, corner)
+    assert twice.num_cells() > refine(geo, corner).num_cells()
+    x = twice.mesh.geometry.x[twice.mesh.geometry.dofmap.array.reshape(-1, 3)][:, :, :2]
+    area = 0.5 * np.abs(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]))
+    at_origin = np.flatnonzero(np.all(x.max(axis=1) <= 0.25 + 1e-12, axis=1))
+    assert comm.allreduce(len(at_origin), op=MPI.SUM) >= 2 * 16 and np.allclose(area[at_origin], 1 / 32 / 16)
+    for tag in geo.tags.values():  # every part keeps its facets, split
+        count = [comm.allreduce(len(g.facet_tags.find(tag)), op=MPI.SUM) for g in (geo, twice)]
+        assert count[1] >= count[0] > 0

@@ -21,6 +21,7 @@ def test_a_mesh_record_writes_eta_and_says_uniform_only_when_it_is():
     assert adapted.summary() == {"degree": 2, "cells": 86, "dofs": 398, "eta": 0.5, "estimate": 7e-3}
     assert list(adapted.summary()) == ["degree", "cells", "dofs", "eta", "estimate"]  # plan.json's order
     assert MeshRecord(2, 344, 1500, 0.2, 3e-3, uniform=True).summary()["uniform"] is True
+    assert MeshRecord(2, 86, 398, 0.5, 7e-3, seconds=0.25).summary()["seconds"] == 0.25  # the round's time
 
 
 def test_the_time_error_is_the_profiles_last_level_at_or_before_t():

@@ -1,4 +1,5 @@
 """solver/run/accuracy/time_error.py: the time part by step doubling."""
+import math
 
 import numpy as np
 import pytest
@@ -65,3 +66,17 @@ def test_the_chosen_step_is_the_largest_within_its_share(comm):
     if n > N0:  # the next larger step T / (n - 1) would not fit
         assert chosen.error * (n / (n - 1)) ** chosen.rate > SAFETY * share
     assert chosen.growth >= 1.0 and 0.0 <= chosen.largest_t <= cfg.time.T
+
+
+def test_restep_takes_the_largest_step_within_the_budget():
+    from solver.run.accuracy.time_error import StepChoice, restep
+
+    chosen = StepChoice(0.1, 1.0 / 46, 2.0, 4e-5, np.array([0.0, 0.5]), np.array([1e-5, 4e-5]), 1.0, 0.0)
+    assert restep(chosen, 5e-5, 1.0) is chosen  # room enough: unchanged
+    assert restep(chosen, 0.0, 1.0) is None
+    smaller = restep(chosen, 3.6e-5, 1.0)
+    n = round(1.0 / smaller.k)
+    assert n == math.ceil(46 * (4e-5 / 3.6e-5) ** 0.5)  # error ~ k^2: the fewest steps within the budget
+    assert smaller.error == pytest.approx(4e-5 * (46 / n) ** 2) and smaller.error <= 3.6e-5
+    assert 4e-5 * (46 / (n - 1)) ** 2 > 3.6e-5  # one step fewer would not fit
+    assert smaller.profile[-1] == pytest.approx(smaller.error)

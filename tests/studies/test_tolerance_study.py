@@ -127,3 +127,16 @@ def test_the_output_names_a_uniform_reference(tmp_path):
     assert "n = 128, k = T/320 (this scene's own)" in ref_row and "| — |" in ref_row, ref_row
     rows = list(csv.DictReader((tmp_path / "tolerance.csv").open()))
     assert rows[0]["ref_tol"] == "" and rows[0]["reference"] == "uniform P2 order 2, n = 128, k = T/320"
+
+
+def test_replaying_a_kept_run_gives_what_running_it_again_measures():
+    """Reference.replay_against (the verified uniform sequence's differences and answer, from the levels kept) equals
+    Reference.measure of the same run made again."""
+    from studies.tolerance import Reference, scene
+
+    cfg = scene("example1").replace({"time": {"T": 0.2}}, label="test")
+    coarse = Reference.uniform(cfg, 4, 4, log=lambda *a: None)
+    fine = Reference.uniform(cfg, 8, 8, log=lambda *a: None)
+    again = fine.measure(coarse.build())
+    assert again["levels"] == 5 and again["error"] > 0
+    assert coarse.replay_against(fine) == pytest.approx(again["error"], rel=1e-12)

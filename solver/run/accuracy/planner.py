@@ -36,7 +36,7 @@ from mpi4py import MPI
 
 from solver.config import Config
 from solver.errors import ToleranceError
-from solver.mesh.adapt import refine, refine_uniformly
+from solver.mesh.adapt import refine, refine_twice, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
 
@@ -47,7 +47,7 @@ from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
 from .solves import AtLargestLevel, AtLevel0, SpaceProbe, solve_level0
-from .time_error import choose_step
+from .time_error import StepChoice, choose_step, restep
 from .zeta import ZetaRuns, zeta_difference, zeta_space
 
 Log = Callable[[str], None]
@@ -66,6 +66,16 @@ ZETA_PROBE_RATIO = 8.0
 # the estimator's constant is calibrated on the scene (:func:`calibration.calibrate`) on the sequence's first mesh whose
 # predicted final mesh is within CALIBRATE_RATIO times its cells (its uniform refinement: a thirtieth of the final mesh)
 CALIBRATE_RATIO = 128.0
+# a mesh over u's target is kept, and the step made smaller to leave it room within the tolerance, where that takes at
+# most STEPS_PER_ROUND more steps of the run: another Dörfler round (a model build, a factorization and an estimate of
+# the whole mesh) costs more than that (Example 1 at 1e-4: a round on 8,666 P2 cells about 1.4 s, a step of the run
+# about 0.2 s)
+STEPS_PER_ROUND = 4
+# a Dörfler set of at most SMALL_SET of the cells (the estimate carried by a few cells at singular corners, near the
+# end of a 2-D sequence) is refined twice in one round (its children again): such a set's first refinement cut eta
+# only 1.2-1.6-fold each round on Example 1 (8,495 -> 8,569 -> 8,666 -> 8,742 P2 cells, one factorization of the
+# whole mesh each), and refining its children too adds some hundred cells
+SMALL_SET = 0.02
 
 
 def dorfler_fraction(theta: float, ratio: float) -> float:
@@ -130,6 +140,7 @@ class Planner:
         self.calibrated: set[int] = set()
         self.calibration: Calibration | None = None
         self.stages: dict[str, float] = {}  # seconds per stage of the plan
+        self.chosen: StepChoice | None = None  # the step (made smaller where a mesh over u's target was kept)
 
     def plan(self) -> Plan:
         """The stages in the module docstring's order. Collective."""
@@ -139,6 +150,7 @@ class Planner:
         chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
         self._time("step", started)
         self.stages["prepare"] = started - s.started
+        self.chosen = chosen
         started = time.perf_counter()
         changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
                                 chosen.k0, chosen.k)
@@ -165,14 +177,18 @@ class Planner:
             geo, zeta_bound = self._fit_zeta(probe, degree, share, geo, cells, run_k0)
         self.stages["mesh"] = (time.perf_counter() - started - self.stages.get("zeta", 0.0)
                                - self.stages.get("calibration", 0.0))
+        chosen = self.chosen
         estimate = ErrorEstimate(self.seqs[degree][-1].estimate * probe.factor, zeta_bound, chosen.error)
         started = time.perf_counter()
         changes = [*changes, *self._degree_change(probe, degree, geo)]
         self._time("ingredients", started)
+        last = self.models.get(degree)
+        level0_u = last.u.x.array.copy() if isinstance(probe, AtLevel0) and last is not None and last.geo is geo \
+            else None
         seconds = time.perf_counter() - s.started
         out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, self.C[degree], chosen.growth,
                    chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
-                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes))
+                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes), level0_u)
         self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
                  f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
                  f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
@@ -274,7 +290,24 @@ class Planner:
                 return None
             return (share - bound) / G
 
-        geo, cells = self._adapt(probe, degree, target, marked=(geo, cells), retarget=retarget, solved_first=True)
+        def accept(rec: MeshRecord) -> bool:
+            """A mesh over the target kept if the step, made smaller by at most STEPS_PER_ROUND steps, leaves its
+            estimate room (:func:`time_error.restep`); then the plan's step is that one."""
+            if damage and (not found or found[0] > ZETA_SHARE * share):
+                return False
+            zeta = found[0] if found else 0.0
+            T = run_k0.time.T
+            smaller = restep(self.chosen, self.setup.tol - rec.estimate * G - zeta, T)
+            if smaller is None or round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
+                return False
+            if smaller is not self.chosen:
+                self.log(f"  kept, {rec.estimate / (target if not found else (share - zeta) / G):.3f} times u's "
+                         f"target: k = {smaller.k:g} ({round(T / smaller.k)} steps) leaves it room")
+            self.chosen = smaller
+            return True
+
+        geo, cells = self._adapt(probe, degree, target, marked=(geo, cells), retarget=retarget, solved_first=True,
+                                 accept=accept)
         if damage and (not found or found[0] > ZETA_SHARE * share):
             return geo, cells, None
         return geo, cells, (found[0] if found else 0.0)
@@ -377,18 +410,22 @@ class Planner:
     def _adapt(self, probe: SpaceProbe, degree: int, target: float, geo: Geometry | None = None,
                max_steps: int | None = None, marked: tuple | None = None,
                retarget: Callable[[MeshRecord, bool], float | None] | None = None,
-               solved_first: bool = False) -> tuple:
+               solved_first: bool = False, accept: Callable[[MeshRecord], bool] | None = None) -> tuple:
         """Dörfler-refine until C eta <= target (or ``max_steps`` meshes solved), appending each mesh's record to
         the degree's sequence; beyond the dof limit, a ToleranceError for the user's tolerance. Starts on ``geo``,
         or refines ``marked`` (geo, eta_K^2: a mesh already solved, the sequence's last) first. Each solve starts
         from the previous mesh's solution (nested: :func:`solves.warm_start`). ``retarget(record, final)``, after
         each solve, may give a new target (``final``: the record meets the old one); with ``solved_first``, it is
-        asked first about ``marked`` itself. Returns the last mesh and its eta_K^2."""
+        asked first about ``marked`` itself. ``accept(record)``, for a record over the target: keep it all the same
+        (the caller pays for it elsewhere). Returns the last mesh and its eta_K^2."""
         seq, theta = self.seqs[degree], self.acc.theta
 
         def refined(mesh: Geometry, cells: np.ndarray) -> Geometry:
             fraction = dorfler_fraction(theta, seq[-1].estimate / target)
-            return refine(mesh, np.flatnonzero(dorfler(cells, fraction, self.comm)))
+            marked = np.flatnonzero(dorfler(cells, fraction, self.comm))
+            if mesh.dim == 2 and self.comm.allreduce(len(marked), op=MPI.SUM) <= SMALL_SET * mesh.num_cells():
+                return refine_twice(mesh, marked)
+            return refine(mesh, marked)
 
         if marked is not None:
             if solved_first and retarget is not None:
@@ -396,13 +433,16 @@ class Planner:
                 target = target if new is None else new
                 if seq[-1].estimate <= target:
                     return marked
+            round_started = time.perf_counter()
             geo = refined(*marked)
+        else:
+            round_started = time.perf_counter()
         solved = 0
         while True:
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
             rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, self.C[degree] * lv.indicator,
-                             geo=lv.model.geo)
+                             geo=lv.model.geo, seconds=time.perf_counter() - round_started)
             seq.append(rec)
             solved += 1
             self.log(f"  P{degree}: {rec.cells} cells, {rec.dofs} dofs, C eta = {rec.estimate:.3e} "
@@ -410,10 +450,12 @@ class Planner:
             if retarget is not None:
                 new = retarget(rec, rec.estimate <= target)
                 target = target if new is None else new
-            if rec.estimate <= target or (max_steps is not None and solved >= max_steps):
+            if rec.estimate <= target or (max_steps is not None and solved >= max_steps) or \
+                    (accept is not None and accept(rec)):
                 return lv.model.geo, lv.cell_indicators
             if rec.dofs > self.setup.max_dofs:
                 raise ToleranceError(self.setup.tol, rec.estimate, rec.dofs, self.setup.limit, target=target)
+            round_started = time.perf_counter()
             geo = refined(lv.model.geo, lv.cell_indicators)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from mpi4py import MPI
 
 from solver.config import Config
 from solver.mesh.geometry import Geometry
@@ -43,13 +44,16 @@ class MeshRecord:
     estimate: float  # C times ``indicator``
     uniform: bool = False  # a uniform refinement (for the damage's part), not a Dörfler step
     geo: Geometry | None = None  # the mesh of a Dörfler step (zeta's nested chain is drawn from them)
+    seconds: float = 0.0  # the round's wall time: the refinement that made the mesh, its solve and estimate
 
     def summary(self) -> dict:
-        """The record as plan.json writes it."""
+        """The record as plan.json writes it (``seconds`` where measured)."""
         out = {"degree": self.degree, "cells": self.cells, "dofs": self.dofs, "eta": self.indicator,
                "estimate": self.estimate}
         if self.uniform:
             out["uniform"] = True
+        if self.seconds:
+            out["seconds"] = self.seconds
         return out
 
 
@@ -74,6 +78,19 @@ class Plan:
     stages: dict = field(default_factory=dict)  # seconds per stage of the planning
     calibration: object = None  # the estimator constant's calibration on the scene (calibration.Calibration), or None
     ingredients: tuple = ()  # each optional ingredient's change of the answer (ingredients.Ingredient)
+    # the displacement of the last t = 0 solve on ``geo`` at ``degree`` (this process's array, ghosts included), the
+    # run's level-0 Newton start (:meth:`warm_start`); None where the mesh was fitted to a later level
+    level0_u: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def warm_start(self, model) -> bool:
+        """Start ``model``'s level-0 Newton (the run's, built on ``geo`` at ``degree``: the same space, so the same
+        dof layout) from the planner's last t = 0 solution, which solved that very problem; False (nothing set)
+        where there is none or the sizes differ on any process. Collective."""
+        ok = self.level0_u is not None and model.u.x.array.size == self.level0_u.size and model.geo is self.geo
+        if not model.geo.comm.allreduce(ok, op=MPI.LAND):
+            return False
+        model.u.x.array[:] = self.level0_u
+        return True
 
     @property
     def changes(self) -> dict:

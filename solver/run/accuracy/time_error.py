@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import ufl
@@ -137,3 +137,17 @@ def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share:
     scale = (k / k4) ** p if e_k4 > 0 else 0.0
     return StepChoice(k0, k, p, e_k4 * scale, est.times, est.profile * scale, growth, pilots[0].t[largest],
                       pilots[0])
+
+
+def restep(chosen: StepChoice, budget: float, T: float) -> StepChoice | None:
+    """The largest T / n whose time error, scaled from ``chosen``'s by (k / chosen.k)^rate, is within ``budget``
+    (what the space parts leave of the tolerance); None if none (budget <= 0)."""
+    if chosen.error <= budget:
+        return chosen
+    if budget <= 0.0:
+        return None
+    k = chosen.k * (budget / chosen.error) ** (1.0 / chosen.rate)
+    n = math.ceil(T / k * (1.0 - 1e-12))
+    k = T / n
+    scale = (k / chosen.k) ** chosen.rate
+    return replace(chosen, k=k, error=chosen.error * scale, profile=chosen.profile * scale)
