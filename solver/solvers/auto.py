@@ -23,6 +23,7 @@ from dataclasses import replace
 
 from solver.errors import DisplacementSolveError
 from solver.physics.displacement import SolveInfo
+from solver.solvers.damped_newton import FALLBACK_IT_FACTOR
 from solver.solvers.method import DisplacementMethod
 from solver.solvers.newton import NewtonSolver
 
@@ -70,13 +71,37 @@ class AutoSolver(DisplacementMethod):
             failed = exc
         finally:
             core.test.growth_limit = None
-        self._start.copy(u.vector)  # the level again, from its start
-        u.x.scatter_forward()
+        # the level again, from its start, or first, on a first contact handed to a method that may start anywhere
+        # (newton_energy), from where the compliance path ended: the zone there is the stiff one's to within a ring
+        # of points, where from the start newton_energy's damped steps shrink the undamped solve's zone by a ring
+        # every few iterations (the sphere at h = 0.03: 17 iterations against 71; docs/model.md §4)
         self.switched_at = self.levels - 1
-        info = self.takeover.solve(scale)
-        return replace(info, iterations=info.iterations + failed.iterations,
-                       linear_solves=info.linear_solves + failed.iterations,
+        starts = [self.newton.path_end] if self.newton.path_end is not None and self.takeover.starts_anywhere else []
+        spent = failed.iterations
+        for start in [*starts, self._start]:
+            start.copy(u.vector)
+            u.x.scatter_forward()
+            try:
+                info = self._handed_over(scale)
+                break
+            except DisplacementSolveError as exc:
+                if start is self._start:
+                    raise
+                spent += exc.iterations  # (a linear solve failed there: CG + GAMG on the stiff law's J) again
+        return replace(info, iterations=info.iterations + spent, linear_solves=info.linear_solves + spent,
                        factorizations=core.factorizations - f0)
+
+    def _handed_over(self, scale: float) -> SolveInfo:
+        """The take-over's solve of the level handed over, with the damped fallback's budget (FALLBACK_IT_FACTOR
+        times its limit; later levels get the limit itself): a first contact in 3-D takes some 40 of its
+        iterations (docs/model.md §4)."""
+        test = self.takeover.test
+        limit = test.max_it
+        test.max_it = FALLBACK_IT_FACTOR * limit
+        try:
+            return self.takeover.solve(scale)
+        finally:
+            test.max_it = limit
 
     def state(self):
         """The take-over's carried arrays (newton_condensed's predictor)."""

@@ -44,6 +44,8 @@ class EnergyNewtonSolver(DisplacementMethod):
     docstring), on :class:`NewtonCore`'s KSP (options under ``mech_``) and to plain Newton's test with the scene's
     ``max_it``. Requires an energy (:func:`~damped_newton.has_energy`)."""
 
+    starts_anywhere = True  # no prediction from the level's start
+
     def __init__(self, core: NewtonCore) -> None:
         problem = core.problem
         if not has_energy(problem):
@@ -87,7 +89,7 @@ class EnergyNewtonSolver(DisplacementMethod):
         self._seen = []
         self._at_trial = False
         snorm = 0.0
-        for it in range(core.settings.max_it + 1):
+        for it in range(self.test.max_it + 1):
             out.iterations = it
             out.reason = self.test(it, x.norm(), snorm, out.history[-1])
             if out.reason != R.ITERATING:

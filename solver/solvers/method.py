@@ -14,6 +14,10 @@ class DisplacementMethod(ABC):
     """Solves a level's displacement problem (u holds the previous level as initial guess; DisplacementSolveError
     where it fails). The checkpoint hooks default to nothing carried."""
 
+    # whether a level may be started from any iterate (auto's take-over of a first contact starts it where the
+    # compliance path ended); False where the method predicts from the level's start (newton_condensed)
+    starts_anywhere = False
+
     @abstractmethod
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level whose force scale is ``scale``."""

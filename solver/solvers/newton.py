@@ -276,6 +276,10 @@ class NewtonSolver(DisplacementMethod):
         self.core, self.problem = core, core.problem
         self.fallback = DampedFallback(core.problem, fallback, core.settings.max_it)
         self.continuation = ComplianceContinuation(core.problem) if core.problem.contact is not None else None
+        # the iterate the compliance path ended at on the last level solved (None: that level took no path): where
+        # auto's take-over starts a first contact Newton has not solved (auto.py)
+        self.path_end: PETSc.Vec | None = None
+        self._path_end = core.problem.u.vector.duplicate() if self.continuation is not None else None
 
     @property
     def fallbacks(self) -> int:
@@ -290,6 +294,7 @@ class NewtonSolver(DisplacementMethod):
         core.carry_first_residual()
         f0 = core.factorizations
         self.fallback.remember_start()
+        self.path_end = None
         if self.continuation is not None and self.continuation.applies():
             reason, history, its = self._first_contact()
         else:
@@ -333,6 +338,8 @@ class NewtonSolver(DisplacementMethod):
             test.max_it = limit
             path.set_scale(1.0)
         path.levels += 1
+        core.problem.u.vector.copy(self._path_end)
+        self.path_end = self._path_end
         reason, stage, n = core.plain_newton()
         history.extend(stage[:n + 1])
         return reason, np.asarray(history), its + n

@@ -120,3 +120,78 @@ def test_a_residual_growing_in_a_row_stops_newton_only_where_asked(comm):
     test.growth_limit = GROWTH_STEPS
     reasons = [test(it, 1.0, 1.0, f) for it, f in enumerate(norms)]
     assert reasons == [R.ITERATING] * (len(norms) - 1) + [R.DIVERGED_DTOL]
+
+
+def test_the_level_handed_over_gets_the_fallback_budget():
+    """The level Newton fails is solved by the take-over with FALLBACK_IT_FACTOR times its limit (the damped
+    fallback's budget: a first contact in 3-D takes some 40 iterations), the later levels with its own limit,
+    and the take-over starts where it may from the compliance path's end, else from the level's start."""
+    from types import SimpleNamespace
+
+    from solver.errors import DisplacementSolveError
+    from solver.physics.displacement import SolveInfo
+    from solver.solvers.damped_newton import FALLBACK_IT_FACTOR
+
+    class Vec:
+        def __init__(self, tag):
+            self.tag = tag
+
+        def duplicate(self):
+            return Vec("")
+
+        def copy(self, other):
+            other.tag = self.tag
+
+    u = SimpleNamespace(vector=Vec("level start"), x=SimpleNamespace(scatter_forward=lambda: None))
+    core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None))
+
+    class FailingNewton:
+        problem, fallbacks, path_end = SimpleNamespace(u=u), 0, None
+
+        def __init__(self):
+            self.core = core
+
+        def solve(self, scale):
+            u.vector.tag = "newton's end"
+            raise DisplacementSolveError("SNES", "DIVERGED_MAX_IT", 8, [1.0], 1e-10)
+
+    class Takeover:
+        fallbacks, starts_anywhere = 0, False
+
+        def __init__(self):
+            self.test = SimpleNamespace(max_it=25)
+            self.seen = []
+
+        def solve(self, scale):
+            self.seen.append((self.test.max_it, u.vector.tag))
+            return SolveInfo(3, 1, 0.0, "CONVERGED")
+
+    newton, takeover = FailingNewton(), Takeover()
+    auto = AutoSolver(newton, takeover)
+    info = auto.solve(1.0)
+    assert info.iterations == 3 + 8 and auto.switched
+    auto.solve(1.0)
+    assert takeover.seen == [(FALLBACK_IT_FACTOR * 25, "level start"), (25, "level start")] and takeover.test.max_it == 25
+    # a take-over that may start anywhere starts a first contact where the compliance path ended
+    u.vector.tag = "level start"
+    newton2, takeover2 = FailingNewton(), Takeover()
+    takeover2.starts_anywhere = True
+    newton2.path_end = Vec("path's end")
+    AutoSolver(newton2, takeover2).solve(1.0)
+    assert takeover2.seen == [(FALLBACK_IT_FACTOR * 25, "path's end")]
+    # ... and where it fails from there, from the level's start
+    u.vector.tag = "level start"
+    newton3, takeover3 = FailingNewton(), Takeover()
+    takeover3.starts_anywhere = True
+    newton3.path_end = Vec("path's end")
+    calls = []
+
+    def fails_first(scale):
+        calls.append(u.vector.tag)
+        if len(calls) == 1:
+            raise DisplacementSolveError("SNES", "DIVERGED_LINEAR_SOLVE", 4, [1.0], 1e-10, linear_reason=-8)
+        return SolveInfo(5, 1, 0.0, "CONVERGED")
+
+    takeover3.solve = fails_first
+    info = AutoSolver(newton3, takeover3).solve(1.0)
+    assert calls == ["path's end", "level start"] and info.iterations == 8 + 4 + 5
