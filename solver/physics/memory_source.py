@@ -194,14 +194,20 @@ class MemorySource:
         self._a = np.empty((len(self.pairs), size_q))  # A eps
         self._extrapolated: np.ndarray | None = None  # eps(u*), made at the first extrapolation (order 2 only)
         self._trace = np.empty(size_q)
-        self.Zq = None
+        self.Zq = None  # zeta at the points as a sparse matrix (an element with dof transformations only)
+        self._zeta_basis = None  # (point, a): zeta's basis at the points, the same on every cell
         if isinstance(zeta, fem.Function):
             Z = zeta.function_space
-            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
-            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
-            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
-            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
-            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+            self._zeta_rows, self._zeta_dofs = rows_q, nodes_of(Z)  # views of the dofmaps (no copies)
+            if not Z.element.needs_dof_transformations and len(cells):  # Lagrange P1, P2
+                self._zeta_basis = np.ascontiguousarray(
+                    fem.Expression(ufl.TrialFunction(Z), rule.points).eval(cells[:1]).reshape(npts, -1))
+            else:
+                zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
+                r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
+                c = np.broadcast_to(self._zeta_dofs[:, None, :], zv.shape).ravel()
+                nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
+                self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
 
     def forget(self) -> None:
         """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
@@ -245,7 +251,17 @@ class MemorySource:
         return self._source(eps, out, scale, base)
 
     def zeta_at_points(self) -> np.ndarray | float:
-        return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+        """zeta at the points (a constant zeta: its value): for a Lagrange zeta the basis at the points, tabulated
+        once on one cell, applied to each cell's dofs in blocks of cells (nothing stored per point; the sums in
+        another order than a sparse matrix's: round-off)."""
+        if self._zeta_basis is None:
+            return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+        z, rows, dofs, basis = self.zeta.x.array, self._zeta_rows, self._zeta_dofs, self._zeta_basis
+        out = np.zeros(self.size_q)
+        for start in range(0, len(dofs), StrainMap.BLOCK):
+            b = slice(start, start + StrainMap.BLOCK)
+            out[rows[b]] = np.take(z, dofs[b]) @ basis.T  # (cell, a) @ (a, point)
+        return out
 
     def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
                 base: np.ndarray | None = None) -> np.ndarray:
