@@ -142,7 +142,9 @@ def holdings(root, limit: int = 40) -> list[tuple[float, str, str]]:
                 continue
             seen.add(id(obj))
             if isinstance(obj, np.ndarray):
-                if obj.base is None or not isinstance(obj.base, np.ndarray):  # its own memory, or a C++ object's
+                data = obj.__array_interface__["data"][0]
+                if (obj.base is None or not isinstance(obj.base, np.ndarray)) and data not in seen:
+                    seen.add(data)  # its own memory, or a C++ object's (listed once, under the first path)
                     found.append((obj.nbytes / MIB, path, f"ndarray {obj.dtype} {obj.shape}"))
                 continue
             if sp.issparse(obj):
@@ -257,8 +259,8 @@ def main(argv: list[str] | None = None) -> int:
              + (" (tracemalloc: numpy's and Python's allocations, current and peak)" if a.trace else "") + ":", "",
              "| after | VmRSS | VmHWM |" + (" traced | traced peak |" if a.trace else ""),
              "|---|---|---|" + ("---|---|" if a.trace else ""), *LOG, "",
-             "What the model holds after the run (reachable arrays and PETSc objects, largest first; a PETSc Mat's "
-             "memory as MatInfo says, which leaves out a preconditioner's hierarchy):", "",
+             "What the model holds after the run (reachable arrays and PETSc objects, largest first; a PETSc Mat as 12 B "
+             "per allocated entry and 16 B per row; a preconditioner's hierarchy is listed below):", "",
              "| MiB | where | what |", "|---|---|---|",
              *(f"| {mib:,.1f} | `{path}` | {what} |" for mib, path, what in held), "",
              "The linear solvers alive after the run (a Mat as 12 B per allocated entry and 16 B per row):", "",
