@@ -77,16 +77,23 @@ class StrainMap:
                 out[c, rows] = e
         return out.reshape(-1)
 
-    def transpose_product(self, m: np.ndarray) -> np.ndarray:
-        """E^T m (m: the components, flat or (component, point)), into u's local array (ghosts included)."""
+    def transpose_product(self, m) -> np.ndarray:
+        """E^T m (m: the components, flat or (component, point); or a callable giving them at given points, asked
+        block by block), into u's local array (ghosts included)."""
         bs, d = self.bs, self._grad.shape[0]
-        m = m.reshape(len(self.pairs), self.size_q)
+        if callable(m):
+            at = m
+        else:
+            whole = m.reshape(len(self.pairs), self.size_q)
+
+            def at(points: np.ndarray) -> np.ndarray:
+                return whole[:, points]
         out = np.zeros((self.size_v // bs, bs))
         index = {pair: c for c, pair in enumerate(self.pairs)}
         for b in self._blocks():
             g = [self._grad[j, b] for j in range(d)]
             rows = self.rows_q[b]
-            mb = m[:, rows.ravel()].reshape((len(self.pairs),) + rows.shape)  # (component, cell, point)
+            mb = at(rows.ravel()).reshape((len(self.pairs),) + rows.shape)  # (component, cell, point)
             mb[d:] *= 0.5  # d eps / d u_(a, i) = sum_j T_ij d_j phi_a, T_ii = m_ii, T_ij = T_ji = m_ij / 2
             nodes = self.nodes[b].ravel()
             for i in range(d):
@@ -161,6 +168,8 @@ class MemorySource:
     extrapolated trapezoid. A strain not kept is computed again: the same values, at the cost of a product.
     """
 
+    POINTS = 65536  # points a block of H's evaluation: 3 MB of scratch in 3-D
+
     def __init__(self, rule: QuadratureRule, u: fem.Function, zeta, integrand: MemoryIntegrand,
                  keep: int = 0) -> None:
 
@@ -191,17 +200,24 @@ class MemorySource:
             self.strain_operator = StrainMap(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
         else:
             self.strain_operator = sparse_strain_operator(grad, nodes, bs, rows_q, size_q, size_v, self.pairs)
-        self._a = np.empty((len(self.pairs), size_q))  # A eps
+        # A eps and its trace for a block of POINTS points: H is formed block by block (no whole-mesh scratch)
+        self._a = np.empty((len(self.pairs), min(size_q, self.POINTS)))
         self._extrapolated: np.ndarray | None = None  # eps(u*), made at the first extrapolation (order 2 only)
-        self._trace = np.empty(size_q)
-        self.Zq = None
+        self._trace = np.empty(self._a.shape[1])
+        self.Zq = None  # zeta at the points as a sparse matrix (an element with dof transformations only)
+        self._zeta_basis = None  # (point, a): zeta's basis at the points, the same on every cell
         if isinstance(zeta, fem.Function):
             Z = zeta.function_space
-            zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
-            r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
-            c = np.broadcast_to(nodes_of(Z)[:, None, :], zv.shape).ravel()
-            nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
-            self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
+            self._zeta_rows, self._zeta_dofs = rows_q, nodes_of(Z)  # views of the dofmaps (no copies)
+            if not Z.element.needs_dof_transformations and len(cells):  # Lagrange P1, P2
+                self._zeta_basis = np.ascontiguousarray(
+                    fem.Expression(ufl.TrialFunction(Z), rule.points).eval(cells[:1]).reshape(npts, -1))
+            else:
+                zv = tabulate(ufl.TrialFunction(Z), Z)[:, :, 0, :]  # (cell, point, a)
+                r = np.broadcast_to(rows_q[:, :, None], zv.shape).ravel()
+                c = np.broadcast_to(self._zeta_dofs[:, None, :], zv.shape).ravel()
+                nz = Z.dofmap.index_map.size_local + Z.dofmap.index_map.num_ghosts
+                self.Zq = sp.csr_matrix((zv.ravel(), (r, c)), shape=(size_q, nz))
 
     def forget(self) -> None:
         """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
@@ -235,7 +251,7 @@ class MemorySource:
         exactly (to round-off), from the kept strains (or a product where one is missing). ``ratio`` r of the
         steps (variable steps): u* = (1 + r) u - r u_prev."""
         if self._extrapolated is None:
-            self._extrapolated = np.empty_like(self._a)
+            self._extrapolated = np.empty((len(self.pairs), self.size_q))
         if ratio == 1.0:
             eps = np.multiply(self.strain(), 2.0, out=self._extrapolated)
             eps -= self.strain(u_prev)
@@ -245,23 +261,39 @@ class MemorySource:
         return self._source(eps, out, scale, base)
 
     def zeta_at_points(self) -> np.ndarray | float:
-        return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+        """zeta at the points (a constant zeta: its value): for a Lagrange zeta the basis at the points, tabulated
+        once on one cell, applied to each cell's dofs in blocks of cells (nothing stored per point; the sums in
+        another order than a sparse matrix's: round-off)."""
+        if self._zeta_basis is None:
+            return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
+        z, rows, dofs, basis = self.zeta.x.array, self._zeta_rows, self._zeta_dofs, self._zeta_basis
+        out = np.zeros(self.size_q)
+        for start in range(0, len(dofs), StrainMap.BLOCK):
+            b = slice(start, start + StrainMap.BLOCK)
+            out[rows[b]] = np.take(z, dofs[b]) @ basis.T  # (cell, a) @ (a, point)
+        return out
 
     def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
                 base: np.ndarray | None = None) -> np.ndarray:
-        """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor."""
+        """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor, in blocks of
+        POINTS points (the law acts point by point: the same values as on the whole array)."""
         d = self.d
-        a = self.integrand.compact(eps, self.zeta_at_points(), self._a, self._trace, scale)
+        zeta = self.zeta_at_points()
         if out is None:
             out = np.empty(self.size_q * d * d)
         full = out.reshape(-1, d * d)
         start = base.reshape(-1, d * d) if base is not None else None
-        for c, (i, j) in enumerate(self.pairs):
-            for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
-                if start is None:
-                    full[:, col] = a[c]
-                else:
-                    np.add(start[:, col], a[c], out=full[:, col])
+        for first in range(0, self.size_q, self.POINTS):
+            b = slice(first, min(first + self.POINTS, self.size_q))
+            n = b.stop - b.start
+            a = self.integrand.compact(eps[:, b], zeta[b] if isinstance(zeta, np.ndarray) else zeta, self._a[:, :n],
+                                       self._trace[:n], scale)
+            for c, (i, j) in enumerate(self.pairs):
+                for col in (i * d + j,) if i == j else (i * d + j, j * d + i):
+                    if start is None:
+                        full[b, col] = a[c]
+                    else:
+                        np.add(start[b, col], a[c], out=full[b, col])
         return out
 
 
@@ -323,21 +355,32 @@ class MemoryForce:
         self.d, self.pairs = source.d, source.pairs
         self.weights = point_weights(rule, source)
         self.strain_operator = source.strain_operator  # E (the source's own arrays)
-        # W m is formed in the source's A eps buffer: both are scratch of one call, never in use at once
-        self._m = source._a
+        # 3-D: W m formed for each block of cells of StrainMap's product (no whole-mesh m); 2-D: m whole (scipy)
+        self._m = None if isinstance(self.strain_operator, StrainMap) else np.empty((len(self.pairs), source.size_q))
+
+    def weighted(self, M: fem.Function, points: np.ndarray | slice, out: np.ndarray | None = None) -> np.ndarray:
+        """W m at the given points (component, point): M's diagonal components and its off-diagonal pairs' sums,
+        times the points' weights."""
+        d = self.d
+        full = M.x.array.reshape(-1, d * d)[points]
+        w = self.weights[points]
+        m = np.empty((len(self.pairs), len(w))) if out is None else out
+        for c, (i, j) in enumerate(self.pairs):
+            if i == j:
+                np.multiply(full[:, i * d + i], w, out=m[c])
+            else:
+                np.add(full[:, i * d + j], full[:, j * d + i], out=m[c])
+                m[c] *= w
+        return m
 
     def __call__(self, M: fem.Function, out: PETSc.Vec) -> None:
         """out = B M = E^T (W m) (owned entries; ``out`` a ghosted vector of u's space)."""
-        d, m = self.d, self._m
-        full = M.x.array.reshape(-1, d * d)
-        for c, (i, j) in enumerate(self.pairs):
-            if i == j:
-                np.multiply(full[:, i * d + i], self.weights, out=m[c])
-            else:
-                np.add(full[:, i * d + j], full[:, j * d + i], out=m[c])
-                m[c] *= self.weights
+        if self._m is None:
+            values = self.strain_operator.transpose_product(lambda points: self.weighted(M, points))
+        else:
+            values = self.strain_operator.T @ self.weighted(M, slice(None), self._m).reshape(-1)
         with out.localForm() as local:
-            local.array[:] = self.strain_operator.T @ m.reshape(-1)
+            local.array[:] = values
         out.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
 

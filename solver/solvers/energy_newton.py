@@ -53,11 +53,18 @@ class EnergyNewtonSolver(DisplacementMethod):
                               allowed="needs a contact energy (no implicit memory term): methods.py builds newton")
         self.core, self.problem = core, problem
         self.test = NewtonTest(core.settings.rtol, core.settings.max_it, core.cycles, problem.contact)
-        self._work = [problem.u.vector.duplicate() for _ in range(4)]
+        self._vectors: list | None = None  # the iteration's four work vectors, made at its first level (auto's
+        # take-over may never run: a run that never hands over does not hold them)
         self._stale = False  # J was modified at a trial point since the last linear solve
         self._seen: list[bytes] = []  # the active sets of the level's iterates
         self._at_trial = False  # x is the last trial point, where J and the active set were assembled
         self.damped_steps = 0  # steps shorter than the Newton step, over the run
+
+    @property
+    def _work(self) -> list:
+        if self._vectors is None:
+            self._vectors = [self.problem.u.vector.duplicate() for _ in range(4)]
+        return self._vectors
 
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
