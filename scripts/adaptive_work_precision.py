@@ -10,6 +10,7 @@ error is interpolated log-log between the two uniform runs around it.
 
     python scripts/adaptive_work_precision.py [--scenes example1 hard load_cycle] [--rounds 3]
         [--ref 10240] [--tolerances 1e-2 1e-3 ...] [--set KEY=VALUE ...]
+        [--out benchmarks/results/NAME] [--chart PATH or '']
 
 (``--tolerances``: the same for every scene, instead of each scene's own; ``--set``: a scene override for every
 run, e.g. another contact compliance).
@@ -167,6 +168,9 @@ def chart(data: dict, path: Path) -> None:
             ax = axes[i][j]
             u = d["uniform"]
             ax.loglog([r["error"] for r in u], [r[key] for r in u], "o-", color="C0", label="uniform")
+            target = 0.5 if key == "levels" else 2 / 3
+            ax.loglog([r["error"] for r in u], [target * r[key] for r in u], "--", color="C0", lw=0.8, alpha=0.6,
+                      label=f"target: {'1/2' if key == 'levels' else '2/3'} of uniform")
             a = d["adaptive"]
             ys = [r["trials" if key == "levels" else key] for r in a]
             ax.loglog([r["error"] for r in a], ys, "s-", color="C3", label="adaptive (achieved error)")
@@ -187,18 +191,24 @@ def chart(data: dict, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def markdown(data: dict, args: argparse.Namespace) -> str:
+def command(args: argparse.Namespace, scenes: list[str]) -> str:
     tols = f" --tolerances {' '.join(f'{t:g}' for t in args.tolerances)}" if args.tolerances else ""
     sets = "".join(f" --set {x}" for x in args.set)
+    return (f"python scripts/adaptive_work_precision.py --scenes {' '.join(scenes)} --rounds {args.rounds} "
+            f"--ref {args.ref}{tols}{sets}")
+
+
+def markdown(data: dict, args: argparse.Namespace) -> str:
     lines = ["# Adaptive steps: work-precision", "",
-             f"`python scripts/adaptive_work_precision.py --scenes {' '.join(args.scenes)} --rounds {args.rounds} "
-             f"--ref {args.ref}{tols}{sets}` "
-             f"(8 x 8 meshes, order 1; reference: {args.ref} uniform steps; error: max over t = 0.1, ..., 1 of the paper's norm). "
+             "8 x 8 meshes, order 1; error: max over t = 0.1, ..., 1 of the paper's norm against a fine uniform "
+             "reference (each scene's command gives its reference steps and rounds; the time loop is the median over "
+             "the rounds, the cases alternated within a round). "
              "Ratios: the adaptive run's steps (accepted + rejected) and time loop over the uniform run's that "
              "reaches the same error (interpolated log-log; NaN: outside the uniform runs' range). Target: steps "
              "<= 0.5, time <= 0.67, error <= tolerance.", ""]
     for scene, d in data.items():
-        lines += [f"## {scene}", "", "| tolerance | levels | rejected | error | reliable | steps ratio | time ratio |",
+        lines += [f"## {scene}", "", f"`{d.get('command', command(args, [scene]))}`", "",
+                  "| tolerance | levels | rejected | error | reliable | steps ratio | time ratio |",
                   "|---|---|---|---|---|---|---|"]
         for a in d["adaptive"]:
             lines.append(f"| {a['tolerance']:g} | {a['levels']} | {a['rejected']} | {a['error']:.3g} | "
@@ -224,17 +234,29 @@ def main() -> None:
     p.add_argument("--tolerances", type=float, nargs="+", default=None)
     p.add_argument("--set", action="append", default=[], help="KEY=VALUE, an override for every run")
     p.add_argument("--out", default=str(ROOT / "benchmarks/results/adaptive_work_precision"))
+    p.add_argument("--redraw", action="store_true", help="only draw the chart (and the .md) from the --out .json")
+    p.add_argument("--append", action="store_true", help="keep the other scenes of the existing --out .json")
+    p.add_argument("--chart", default=str(ROOT / "docs/figures/adaptive_work_precision.png"), help="'' for none")
     args = p.parse_args()
     if args.tolerances:
         for scene in TOLERANCES:
             TOLERANCES[scene] = args.tolerances
     EXTRA[:] = args.set
     data, out = {}, Path(args.out)
+    if args.redraw:
+        data = json.loads(out.with_suffix(".json").read_text())
+        out.with_suffix(".md").write_text(markdown(data, args))
+        chart(data, Path(args.chart))
+        return
+    if args.append and out.with_suffix(".json").exists():
+        data = {k: v for k, v in json.loads(out.with_suffix(".json").read_text()).items() if k not in args.scenes}
     for scene in args.scenes:  # written after each scene: a study cut short keeps the scenes it finished
         data[scene] = study(scene, args.rounds, args.ref)
+        data[scene]["command"] = command(args, [scene])
         out.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float) + "\n")
         out.with_suffix(".md").write_text(markdown(data, args))
-        chart(data, ROOT / "docs/figures/adaptive_work_precision.png")
+        if args.chart:
+            chart(data, Path(args.chart))
         print(markdown({scene: data[scene]}, args), flush=True)
 
 
