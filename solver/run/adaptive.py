@@ -37,7 +37,7 @@ from solver.config import Config
 from solver.errors import SolveFailure
 from solver.laws.memory import MemoryIntegrand
 from solver.physics.material import lame, strain
-from solver.physics.memory_source import MemorySource
+from solver.physics.memory_source import MemorySource, point_weights
 
 SAFETY = 0.9  # the next step aims at SAFETY times the tolerance
 GROW, SHRINK = 2.0, 0.2  # the most a step grows or shrinks to the next one
@@ -67,15 +67,15 @@ def output_times(cfg: Config) -> list[float]:
 
 
 class Snapshot:
-    """A copy of the model's whole state at an accepted level, put back when a trial step is rejected."""
+    """A copy of the model's whole state at an accepted level, put back when a trial step is rejected. One object
+    serves the whole run: :meth:`take` copies into the buffers of the last take (no allocation per step)."""
 
     def __init__(self, model) -> None:
         self.model = model
-        self.fields = [(f.x.array, f.x.array.copy()) for f in self._functions(model)]
-        self.damage = ({k: v.copy() for k, v in model.damage.state().items()}, model.damage.scalars()) \
-            if model.damage is not None else None
-        self.history = {k: v.copy() for k, v in model.history.state().items()} if model.history is not None else {}
-        self.mech = ({k: v.copy() for k, v in model.mech.state().items()}, model.mech.scalars())
+        self.fields: list[tuple[np.ndarray, np.ndarray]] = []
+        self.arrays: dict[str, dict[str, np.ndarray]] = {}
+        self.scalars: dict[str, dict[str, float]] = {}
+        self.take()
 
     @staticmethod
     def _functions(model) -> list[fem.Function]:
@@ -86,23 +86,55 @@ class Snapshot:
             out.append(model.damage.zeta)
         return out
 
+    def _parts(self) -> dict:
+        model = self.model
+        out = {"mech": model.mech}
+        if model.damage is not None:
+            out["damage"] = model.damage
+        if model.history is not None:
+            out["history"] = model.history
+        return out
+
+    @staticmethod
+    def _copy(into: dict[str, np.ndarray], arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        out = {}
+        for k, v in arrays.items():
+            old = into.get(k)
+            if old is not None and old.shape == v.shape and old.dtype == v.dtype:
+                np.copyto(old, v)
+                out[k] = old
+            else:
+                out[k] = v.copy()
+        return out
+
+    def take(self) -> None:
+        """Copy the current state (the accepted level's)."""
+        live = [f.x.array for f in self._functions(self.model)]
+        if len(live) == len(self.fields) and all(a is t for a, (t, _) in zip(live, self.fields)):
+            for target, values in self.fields:
+                np.copyto(values, target)
+        else:
+            self.fields = [(a, a.copy()) for a in live]
+        for name, part in self._parts().items():
+            self.arrays[name] = self._copy(self.arrays.get(name, {}), part.state())
+            if name != "history":
+                self.scalars[name] = part.scalars()
+
     def restore(self) -> None:
         model = self.model
         for target, values in self.fields:
             target[:] = values
-        if self.damage is not None:
-            arrays, scalars = self.damage
-            for k, v in arrays.items():
+        if model.damage is not None:
+            for k, v in self.arrays["damage"].items():
                 model.damage.restore(k, v)
-            model.damage.restore_scalars(scalars)
+            model.damage.restore_scalars(self.scalars["damage"])
         if model.history is not None:
             live = model.history.state()
-            for k, v in self.history.items():
+            for k, v in self.arrays["history"].items():
                 live[k][...] = v
-        arrays, scalars = self.mech
-        for k, v in arrays.items():
+        for k, v in self.arrays["mech"].items():
             model.mech.restore_vector(k, v)
-        model.mech.restore_scalars(scalars)
+        model.mech.restore_scalars(self.scalars["mech"])
 
 
 class StepController:
@@ -129,6 +161,7 @@ class StepController:
         self._memory_parts(model)
         self._damage_parts(model)
         self.gamma_c = self._contact_measure(model)
+        self._snapshot: Snapshot | None = None
 
     # ------------------------------------------------------------------ state
     def scalars(self) -> dict[str, float]:
@@ -169,7 +202,9 @@ class StepController:
         self.past_H = [np.zeros_like(history.M.x.array) for _ in range(self.p)]
         self._H = np.zeros_like(history.M.x.array)
         self._dm = fem.Function(history.M.function_space)
-        self._fm = fem.form(ufl.inner(self._dm, self._dm) * history.rule.dx)
+        # ||dM||^2 = sum over the points of w_q |J_K| dM : dM (the memory rule's own integral; ghosts weigh 0)
+        self._w = point_weights(history.rule, history.H)
+        self._dd = history.M.x.array.size // max(self._w.size, 1)
         self.E_M = np.zeros_like(history.M.x.array)  # the accumulated error of M
         if model.damage is not None:  # E_zeta Phi_L(A eps(u)): the accumulated damage error's rate into M
             self._Ez = fem.Function(model.damage.V)
@@ -195,8 +230,11 @@ class StepController:
         self.E_z = np.zeros_like(damage.zeta.x.array)  # the accumulated error of zeta
         self.zeta_star = model.cfg.damage.zeta_star if model.cfg.damage.clip else -math.inf
 
-    def _norm(self, form) -> float:
-        return math.sqrt(max(self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM), 0.0))
+    def _norm_m(self, dm: np.ndarray) -> float:
+        """||dM|| in L2 over the memory rule's points (dM a memory-space array)."""
+        sq = dm.reshape(-1, self._dd)
+        local = float(np.dot(self._w, np.einsum("ij,ij->i", sq, sq)))
+        return math.sqrt(max(self.comm.allreduce(local, op=MPI.SUM), 0.0))
 
     @staticmethod
     def _contact_measure(model) -> float:
@@ -247,10 +285,9 @@ class StepController:
                 dm -= (extra * g0) * self.past_H[1]
                 dm *= 0.5 * k * (1.0 + k / (3.0 * (k + kp)))  # the extrapolated term's miss and the trapezoid's
             self._lm = dm.copy()
-            dm[:] = self.E_M
-            err_u0 = self._norm(self._fm) / self.alpha
-            dm += self._lm
-            err_u = self._norm(self._fm) / self.alpha
+            err_u0 = self._norm_m(self.E_M) / self.alpha
+            dm += self.E_M
+            err_u = self._norm_m(dm) / self.alpha
         err_z = err_z0 = 0.0
         if self.past_phi:
             zeta = self.model.damage.zeta.x.array[: self.nz]
@@ -349,7 +386,11 @@ class StepController:
         while self.t < self.T:
             k, t_new = self._propose()
             wanted = max(self.k_next, k)
-            snap, rejected = Snapshot(model), 0
+            if self._snapshot is None:
+                self._snapshot = Snapshot(model)
+            else:
+                self._snapshot.take()
+            snap, rejected = self._snapshot, 0
             while True:
                 try:
                     row = stepper.step(self.n + 1, t_new, k, None if self.n == 0 else self.k_prev)
