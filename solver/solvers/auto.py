@@ -75,21 +75,37 @@ class AutoSolver(DisplacementMethod):
         # (newton_energy), from where the compliance path ended: the zone there is the stiff one's to within a ring
         # of points, where from the start newton_energy's damped steps shrink the undamped solve's zone by a ring
         # every few iterations (the sphere at h = 0.03: 17 iterations against 71; docs/model.md §4)
+        # A failed linear solve of the iterative solver (CG + GAMG indefinite on the stiff law's J: the sphere at
+        # h = 0.015, docs/model.md §4) puts the core on the direct solver for the rest of the run, and a take-over
+        # whose linear solve failed is tried again from the same start
         self.switched_at = self.levels - 1
+        self._direct_if_linear_failed(failed)
         starts = [self.newton.path_end] if self.newton.path_end is not None and self.takeover.starts_anywhere else []
         spent = failed.iterations
-        for start in [*starts, self._start]:
+        tries = [*starts, self._start]
+        while tries:
+            start = tries[0]
             start.copy(u.vector)
             u.x.scatter_forward()
             try:
                 info = self._handed_over(scale)
                 break
             except DisplacementSolveError as exc:
-                if start is self._start:
+                spent += exc.iterations
+                if self._direct_if_linear_failed(exc):
+                    continue  # the same start, solved directly
+                tries.pop(0)
+                if not tries:
                     raise
-                spent += exc.iterations  # (a linear solve failed there: CG + GAMG on the stiff law's J) again
         return replace(info, iterations=info.iterations + spent, linear_solves=info.linear_solves + spent,
                        factorizations=core.factorizations - f0)
+
+    def _direct_if_linear_failed(self, exc: DisplacementSolveError) -> bool:
+        """Put the core on the direct solver where ``exc`` is a failed iterative linear solve; whether it did."""
+        if exc.linear_reason >= 0 or not self.core.iterative:
+            return False
+        self.core.use_direct()
+        return True
 
     def _handed_over(self, scale: float) -> SolveInfo:
         """The take-over's solve of the level handed over, with the damped fallback's budget (FALLBACK_IT_FACTOR
