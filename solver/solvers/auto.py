@@ -130,9 +130,10 @@ class AutoSolver(DisplacementMethod):
             self.takeover.restore(name, values)
 
     def scalars(self) -> dict[str, float]:
-        """What a checkpoint carries of the switch: the level it was made at (-1: not yet)."""
+        """What a checkpoint carries of the switch: the level it was made at (-1: not yet), and whether the
+        iterative linear solver was replaced by the direct one (:meth:`NewtonCore.use_direct`)."""
         return {"switched_at": float(-1 if self.switched_at is None else self.switched_at),
-                "levels": float(self.levels)}
+                "levels": float(self.levels), "direct": float(self.core.direct_switches)}
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         """Take back :meth:`scalars`: a restarted run goes on with the method the checkpointed one had."""
@@ -140,3 +141,5 @@ class AutoSolver(DisplacementMethod):
         self.levels = int(scalars.get("levels", 0))
         if at >= 0:
             self.switched_at = at
+        if scalars.get("direct", 0.0) > 0:
+            self.core.use_direct()
