@@ -204,7 +204,8 @@ class NewtonCore:
             return
         comm = self.problem.u.function_space.mesh.comm
         ksp = PETSc.KSP().create(comm)
-        self._direct_options = OwnOptions(ksp, self.prefix + "direct_",
+        # the options live with the core (not the Python wrapper of the KSP): MUMPS reads mat_mumps_* when it factors
+        self._direct_options = OwnOptions(self, self.prefix + "direct_",
                                           direct_options(comm, "mumps", self.problem.symmetric), ())
         ksp.setOptionsPrefix(self._direct_options.prefix)
         ksp.setOperators(self.problem.J, self.problem.J)
