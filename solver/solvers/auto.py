@@ -75,21 +75,37 @@ class AutoSolver(DisplacementMethod):
         # (newton_energy), from where the compliance path ended: the zone there is the stiff one's to within a ring
         # of points, where from the start newton_energy's damped steps shrink the undamped solve's zone by a ring
         # every few iterations (the sphere at h = 0.03: 17 iterations against 71; docs/model.md §4)
+        # A failed linear solve of the iterative solver (CG + GAMG indefinite on the stiff law's J: the sphere at
+        # h = 0.015, docs/model.md §4) puts the core on the direct solver for the rest of the run, and a take-over
+        # whose linear solve failed is tried again from the same start
         self.switched_at = self.levels - 1
+        self._direct_if_linear_failed(failed)
         starts = [self.newton.path_end] if self.newton.path_end is not None and self.takeover.starts_anywhere else []
         spent = failed.iterations
-        for start in [*starts, self._start]:
+        tries = [*starts, self._start]
+        while tries:
+            start = tries[0]
             start.copy(u.vector)
             u.x.scatter_forward()
             try:
                 info = self._handed_over(scale)
                 break
             except DisplacementSolveError as exc:
-                if start is self._start:
+                spent += exc.iterations
+                if self._direct_if_linear_failed(exc):
+                    continue  # the same start, solved directly
+                tries.pop(0)
+                if not tries:
                     raise
-                spent += exc.iterations  # (a linear solve failed there: CG + GAMG on the stiff law's J) again
         return replace(info, iterations=info.iterations + spent, linear_solves=info.linear_solves + spent,
                        factorizations=core.factorizations - f0)
+
+    def _direct_if_linear_failed(self, exc: DisplacementSolveError) -> bool:
+        """Put the core on the direct solver where ``exc`` is a failed iterative linear solve; whether it did."""
+        if exc.linear_reason >= 0 or not self.core.iterative:
+            return False
+        self.core.use_direct()
+        return True
 
     def _handed_over(self, scale: float) -> SolveInfo:
         """The take-over's solve of the level handed over, with the damped fallback's budget (FALLBACK_IT_FACTOR
@@ -114,9 +130,10 @@ class AutoSolver(DisplacementMethod):
             self.takeover.restore(name, values)
 
     def scalars(self) -> dict[str, float]:
-        """What a checkpoint carries of the switch: the level it was made at (-1: not yet)."""
+        """What a checkpoint carries of the switch: the level it was made at (-1: not yet), and whether the
+        iterative linear solver was replaced by the direct one (:meth:`NewtonCore.use_direct`)."""
         return {"switched_at": float(-1 if self.switched_at is None else self.switched_at),
-                "levels": float(self.levels)}
+                "levels": float(self.levels), "direct": float(self.core.direct_switches)}
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         """Take back :meth:`scalars`: a restarted run goes on with the method the checkpointed one had."""
@@ -124,3 +141,5 @@ class AutoSolver(DisplacementMethod):
         self.levels = int(scalars.get("levels", 0))
         if at >= 0:
             self.switched_at = at
+        if scalars.get("direct", 0.0) > 0:
+            self.core.use_direct()

@@ -34,6 +34,7 @@ from solver.solvers.linear import (
     KrylovTolerance,
     OwnOptions,
     check_options,
+    direct_options,
     linear_options,
     rigid_body_modes,
 )
@@ -171,6 +172,7 @@ class NewtonCore:
         self.problem, self.settings = problem, settings
         self.factorizations = 0  # factorizations (direct) or preconditioner set-ups (iterative)
         self.krylov_iterations = 0  # summed over the run (iterative solves)
+        self.direct_switches = 0  # 1 once :meth:`use_direct` has replaced the iterative solver
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
         self.iterative = linear.iterative
@@ -192,6 +194,26 @@ class NewtonCore:
         check_options(comm, self.prefix, defaults, linear.petsc_options, snes=True)
         self.options = OwnOptions(self, self.prefix, defaults, linear.petsc_options)
         self.snes = make_snes(comm, self.options.prefix, problem, settings, self._residual, self._jacobian, self.test)
+
+    def use_direct(self) -> None:
+        """From now on, solve J by MUMPS's Cholesky (LU if J is not symmetric; the direct solver auto picks for a
+        3-D run below linear.AUTO_ITERATIVE_DOFS_3D dofs) instead of the iterative solver: the SNES gets a new KSP
+        with options of its own (the scene's ``mech_`` options are the iterative solver's and are not applied).
+        What auto does where CG + GAMG fails on a stiff contact Jacobian (docs/model.md §4). Collective."""
+        if not self.iterative:
+            return
+        comm = self.problem.u.function_space.mesh.comm
+        ksp = PETSc.KSP().create(comm)
+        # the options live with the core (not the Python wrapper of the KSP): MUMPS reads mat_mumps_* when it factors
+        self._direct_options = OwnOptions(self, self.prefix + "direct_",
+                                          direct_options(comm, "mumps", self.problem.symmetric), ())
+        ksp.setOptionsPrefix(self._direct_options.prefix)
+        ksp.setOperators(self.problem.J, self.problem.J)
+        ksp.setFromOptions()
+        self.snes.setKSP(ksp)
+        self.iterative = False
+        self.krylov_tolerance.applies = False
+        self.direct_switches += 1
 
     def count_factorizations(self, n: int) -> None:
         """Count ``n`` factorizations (set-ups) made by a method's own iteration on the core's KSP or beside it."""

@@ -143,7 +143,8 @@ def test_the_level_handed_over_gets_the_fallback_budget():
             other.tag = self.tag
 
     u = SimpleNamespace(vector=Vec("level start"), x=SimpleNamespace(scatter_forward=lambda: None))
-    core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None))
+    core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None), iterative=False)
+    core.use_direct = lambda: setattr(core, "iterative", False)
 
     class FailingNewton:
         problem, fallbacks, path_end = SimpleNamespace(u=u), 0, None
@@ -195,3 +196,42 @@ def test_the_level_handed_over_gets_the_fallback_budget():
     takeover3.solve = fails_first
     info = AutoSolver(newton3, takeover3).solve(1.0)
     assert calls == ["path's end", "level start"] and info.iterations == 8 + 4 + 5
+    # ... unless the failed linear solve was the iterative solver's: then from the path's end again, solved directly
+    u.vector.tag = "level start"
+    newton4, takeover4 = FailingNewton(), Takeover()
+    takeover4.starts_anywhere = True
+    newton4.path_end = Vec("path's end")
+    calls.clear()
+    takeover4.solve = fails_first
+    core.iterative = True
+    info = AutoSolver(newton4, takeover4).solve(1.0)
+    assert calls == ["path's end", "path's end"] and not core.iterative and info.iterations == 8 + 4 + 5
+
+
+def test_a_failed_iterative_linear_solve_is_solved_again_directly(comm):
+    """CG + AMG stopped after one iteration (mech_ksp_max_it = 1) fails Newton's first linear solve: auto puts the
+    core on the direct solver and hands the level over, which it then solves; the levels match a direct run's to
+    round-off (the direct run's Newton solves them all)."""
+    extra = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "time.T=0.3", "output.xdmf=false"]
+    model, rows = _run(comm, "auto", [*extra, "solver.linear='iterative'", "solver.petsc_options.mech_ksp_max_it=1"],
+                       "example1.toml")
+    solver = model.mech.solver
+    assert solver.switched_at == 0 and solver.core.direct_switches == 1 and not solver.core.iterative
+    ref_model, ref = _run(comm, "auto", [*extra, "solver.linear='mumps'"], "example1.toml")
+    assert not ref_model.mech.solver.switched
+    for key in ("contact_force", "strain_norm"):
+        assert [r[key] for r in rows] == pytest.approx([r[key] for r in ref], rel=1e-10), key
+    assert model.u.vector.norm() == pytest.approx(ref_model.u.vector.norm(), rel=1e-10)
+    # a checkpoint carries the switch: a model restored from these scalars solves directly from the start
+    fresh = build_model(load(ROOT / "configs" / "example1.toml",
+                             [*extra, "solver.linear='iterative'", "solver.method='auto'"]), comm)
+    assert fresh.mech.solver.core.iterative
+    fresh.mech.restore_scalars(model.mech.scalars())
+    assert not fresh.mech.solver.core.iterative and fresh.mech.solver.core.ksp.getType() == "preonly"
+
+
+def test_where_the_iterative_solves_succeed_it_stays_iterative(comm):
+    """The same scene with CG + AMG's own limits: no linear solve fails, no switch to the direct solver."""
+    extra = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "time.T=0.3", "output.xdmf=false"]
+    model, _ = _run(comm, "auto", [*extra, "solver.linear='iterative'"], "example1.toml")
+    assert model.mech.solver.core.direct_switches == 0 and model.mech.solver.core.iterative
