@@ -349,6 +349,15 @@ class StepController:
             return 0.5 * left, self.t + 0.5 * left
         return k, self.t + k
 
+    def _retry(self, rejected: float, k: float) -> tuple[float, float]:
+        """A rejected trial's retry at k, landed on the next mark like any step, but never stretched back to the
+        rejected size (a trial that lands on a mark would be retried unchanged for ever): then half the way."""
+        k_new, t_new = self._land(k)
+        if k_new < rejected * (1 - 1e-12):
+            return k_new, t_new
+        half = 0.5 * (t_new - self.t)
+        return half, self.t + half
+
     def _snap(self, k: float) -> float:
         """k rounded down to the grid T 2^(j/GRID), within the bounds: the chosen steps are exact powers, and two
         runs whose estimates differ by round-off choose the same steps (unless one sits on a grid point)."""
@@ -399,7 +408,7 @@ class StepController:
                         raise
                     snap.restore()
                     rejected += 1
-                    k, t_new = self._land(self._snap(max(0.25 * k, self.k_min)))
+                    k, t_new = self._retry(k, self._snap(max(0.25 * k, self.k_min)))
                     wanted = k
                     continue
                 est = self.estimate(t_new)
@@ -408,7 +417,7 @@ class StepController:
                     snap.restore()
                     rejected += 1
                     shrink = min(max(SAFETY * r ** (-1.0 / (self.p + 1)), RETRY[0]), RETRY[1])
-                    k, t_new = self._land(self._snap(max(k * shrink, self.k_min)))
+                    k, t_new = self._retry(k, self._snap(max(k * shrink, self.k_min)))
                     wanted = k
                     continue
                 break

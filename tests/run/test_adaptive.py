@@ -75,3 +75,24 @@ def test_the_step_grid_and_bounds(comm):
         assert 0.001 <= s <= 0.1 and (s <= k or s == 0.001)
         j = np.log2(s / 0.6) * 8
         assert s in (0.001, 0.1) or abs(j - round(j)) < 1e-9
+
+
+def test_a_rejected_trial_that_lands_on_a_mark_is_retried_smaller(comm, monkeypatch):
+    """load_cycle (8 x 8, tolerance 0.1, marks every 0.1) rejects its trial from 0.75 to the mark 0.8; the retry's
+    landing stretched 0.9 of that step back to the whole of it, so the same trial was tried for ever. Every retry is
+    now smaller than the trial it replaces, and the run ends (a cap on the trials turns a loop into a failure)."""
+    tried, step = [], Stepper.step
+
+    def counted(self, n, t, k, k_prev):
+        tried.append((n, t, k))
+        assert len(tried) < 3000, f"a loop of trials: {tried[-3:]}"
+        return step(self, n, t, k, k_prev)
+
+    monkeypatch.setattr(Stepper, "step", counted)
+    marks = "output.times=[" + ", ".join(f"{0.1 * i:g}" for i in range(1, 10)) + "]"
+    cfg = load(ROOT / "configs/load_cycle.toml", ["mesh.nx=8", "mesh.ny=8", "time.adaptive=true",
+                                                   "time.tolerance=0.1", "time.k=0.01", marks])
+    rows = list(levels(build_model(cfg, comm)))
+    assert rows[-1]["t"] == pytest.approx(1.0, abs=1e-12)
+    for (n0, _, k0), (n1, _, k1) in zip(tried, tried[1:]):
+        assert n1 != n0 or k1 < k0  # a retry of level n is smaller than the trial before it
