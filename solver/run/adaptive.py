@@ -201,7 +201,8 @@ class StepController:
         self.source = history.H
         self.past_H = [np.zeros_like(history.M.x.array) for _ in range(self.p)]
         self._H = np.zeros_like(history.M.x.array)
-        self._dm = fem.Function(history.M.function_space)
+        self._dm = np.zeros_like(history.M.x.array)  # the step's error of M (scratch)
+        self._lm = np.zeros_like(history.M.x.array)  # the last trial's, added to E_M when it is accepted
         # ||dM||^2 = sum over the points of w_q |J_K| dM : dM (the memory rule's own integral; ghosts weigh 0)
         self._w = point_weights(history.rule, history.H)
         self._dd = history.M.x.array.size // max(self._w.size, 1)
@@ -277,14 +278,14 @@ class StepController:
         if self.past_H:
             g0 = float(np.sum(self.c))
             gk = float(np.sum(self.c * np.exp(-k / self.tau))) if self.p == 1 else g0
-            dm = self._dm.x.array
+            dm = self._dm
             np.multiply(self._H, now * g0, out=dm)
             dm -= (old * gk) * self.past_H[0]
             if self.p == 2:
                 kp = self.past_t[0] - self.past_t[1]
                 dm -= (extra * g0) * self.past_H[1]
                 dm *= 0.5 * k * (1.0 + k / (3.0 * (k + kp)))  # the extrapolated term's miss and the trapezoid's
-            self._lm = dm.copy()
+            np.copyto(self._lm, dm)
             err_u0 = self._norm_m(self.E_M) / self.alpha
             dm += self.E_M
             err_u = self._norm_m(dm) / self.alpha
