@@ -290,12 +290,19 @@ class Planner:
                 return None
             return (share - bound) / G
 
+        def zeta_part() -> float | None:
+            """zeta's bound as this mesh counts it (0 without damage); None with damage where it is not yet measured
+            or is over ZETA_SHARE of the share (:meth:`_fit_zeta`'s then)."""
+            if damage and (not found or found[0] > ZETA_SHARE * share):
+                return None
+            return found[0] if found else 0.0
+
         def accept(rec: MeshRecord) -> bool:
             """A mesh over the target kept if the step, made smaller by at most STEPS_PER_ROUND steps, leaves its
             estimate room (:func:`time_error.restep`); then the plan's step is that one."""
-            if damage and (not found or found[0] > ZETA_SHARE * share):
+            zeta = zeta_part()
+            if zeta is None:
                 return False
-            zeta = found[0] if found else 0.0
             T = run_k0.time.T
             smaller = restep(self.chosen, self.setup.tol - rec.estimate * G - zeta, T)
             if smaller is None or round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
@@ -308,9 +315,7 @@ class Planner:
 
         geo, cells = self._adapt(probe, degree, target, marked=(geo, cells), retarget=retarget, solved_first=True,
                                  accept=accept)
-        if damage and (not found or found[0] > ZETA_SHARE * share):
-            return geo, cells, None
-        return geo, cells, (found[0] if found else 0.0)
+        return geo, cells, zeta_part()
 
     def _calibrate(self, probe: SpaceProbe, degree: int) -> None:
         """C for this scene from the sequence's last mesh and its uniform refinement (:func:`calibration.calibrate`);
@@ -433,7 +438,7 @@ class Planner:
                 target = target if new is None else new
                 if seq[-1].estimate <= target:
                     return marked
-            round_started = time.perf_counter()
+            round_started = time.perf_counter()  # after retarget, whose calibration and zeta runs count apart
             geo = refined(*marked)
         else:
             round_started = time.perf_counter()
