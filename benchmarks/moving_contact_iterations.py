@@ -1,12 +1,15 @@
 """Newton iterations per level on the moving-contact scenes, two trees one after the other (docs/model.md §4).
 
-    python benchmarks/moving_contact_iterations.py --base CHECKOUT_OF_THE_BASE [--out PATH_WITHOUT_SUFFIX]
+    python benchmarks/moving_contact_iterations.py [--base CHECKOUT_OF_THE_BASE] [--rounds N] [--out PATH_WITHOUT_SUFFIX]
 
 Each scene is run under the default settings (``auto``) at P2, order 2, with ``python -m solver run`` of the base
 tree then of this one (each tree on PYTHONPATH, cwd its root), scene after scene, on the same machine in the same
-run: configs/moving_contact.toml at n = 32 and configs/hard.toml at n = 48. Writes OUT.csv (scene, tree, total
-Newton iterations, largest on a level, the levels above 10 as level:iterations) from each run's timeseries.csv and
-prints it. Iteration counts only: no timing is compared here.
+run: configs/moving_contact.toml at n = 32 and configs/hard.toml at n = 48; without --base, this tree alone.
+Writes OUT.csv (scene, tree, total Newton iterations, largest on a level, the levels above 10 as level:iterations,
+and the displacement solves' time, the sum of timeseries.csv's time_displacement) from each run's timeseries.csv
+and prints it. With --rounds N > 1 each scene is run N times, base and this tree alternated (base, this, base,
+this ...), and the median and range of this tree's displacement time over the base's, round by round, are added
+(the iteration counts are the same in every round: the switch and the iterations depend on the iterates only).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -24,32 +28,49 @@ P2 = ["discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2
 SCENES = {"moving_contact_n32": ("configs/moving_contact.toml", 32), "hard_n48": ("configs/hard.toml", 48)}
 
 
-def run(tree: Path, scene: str, n: int, out: Path) -> list[int]:
-    """The Newton iterations of every level of ``scene`` at n by the solver of ``tree``."""
+def run(tree: Path, scene: str, n: int, out: Path) -> tuple[list[int], float]:
+    """The Newton iterations of every level of ``scene`` at n by the solver of ``tree``, and the displacement
+    solves' time (s) over the run."""
     sets = [*P2, f"mesh.nx={n}", f"mesh.ny={n}", f"output.directory='{out}'"]
     cmd = [sys.executable, "-m", "solver", "run", str(tree / scene)]
     for s in sets:
         cmd += ["--set", s]
     subprocess.run(cmd, cwd=tree, env={**os.environ, "PYTHONPATH": str(tree)}, check=True, capture_output=True)
     with open(out / "timeseries.csv", newline="") as f:
-        return [int(row["newton_iterations"]) for row in csv.DictReader(f)]
+        rows = list(csv.DictReader(f))
+    return [int(row["newton_iterations"]) for row in rows], sum(float(row["time_displacement"]) for row in rows)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--base", required=True, help="a checkout of the base tree")
+    parser.add_argument("--base", help="a checkout of the base tree (none: this tree alone)")
+    parser.add_argument("--rounds", type=int, default=1, help="runs of each scene, base and this tree alternated")
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "moving_contact_iterations_runs"))
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="moving_contact_"))
     rows = []
+    trees = ([("base", Path(args.base).resolve())] if args.base else []) + [("this", ROOT)]
     for name, (scene, n) in SCENES.items():
-        for tree, src in (("base", Path(args.base).resolve()), ("this", ROOT)):
-            its = run(src, scene, n, work / f"{name}_{tree}")
-            above = " ".join(f"{i}:{k}" for i, k in enumerate(its) if k > 10)
-            rows.append({"scene": name, "tree": tree, "total": sum(its), "largest": max(its), "above_10": above})
-            print(rows[-1], flush=True)
+        times: dict[str, list[float]] = {tree: [] for tree, _ in trees}
+        for k in range(args.rounds):
+            for tree, src in trees:
+                its, seconds = run(src, scene, n, work / f"{name}_{tree}_{k}")
+                times[tree].append(seconds)
+                if k == 0:
+                    above = " ".join(f"{i}:{j}" for i, j in enumerate(its) if j > 10)
+                    rows.append({"scene": name, "tree": tree, "total": sum(its), "largest": max(its),
+                                 "above_10": above})
+                print(name, tree, k, sum(its), f"{seconds:.3f} s", flush=True)
+        for tree, _ in trees:
+            row = next(r for r in rows if r["scene"] == name and r["tree"] == tree)
+            row["time_displacement_median"] = f"{statistics.median(times[tree]):.3f}"
+            if args.base:
+                ratios = [a / b for a, b in zip(times["this"], times["base"], strict=True)]
+                row["this_over_base_median"] = f"{statistics.median(ratios):.3f}"
+                row["this_over_base_range"] = f"{min(ratios):.3f}-{max(ratios):.3f}"
+            print(row, flush=True)
     with open(f"{args.out}.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[0]))
+        w = csv.DictWriter(f, list(rows[-1]))
         w.writeheader()
         w.writerows(rows)
     return 0

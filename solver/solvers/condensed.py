@@ -87,6 +87,7 @@ class CondensedNewtonSolver(DisplacementMethod):
         self.dofs, self.linear = dofs, linear
         # the contact term at its points on B (2-D): the reduced iteration of PointReduced; else Reduced's forms
         self.points = PointContact(points, dofs, problem.u) if PointContact.applies(points) else None
+        self.has_path = self.points is not None  # PointReduced's compliance path on v
         self.cond: Condensation | None = None  # built at the first level (its m solves count in the time loop)
         self.reduced_iterations = 0  # over the run
         self.previous: np.ndarray | None = None  # the contact dofs' values at the last level's start

@@ -17,6 +17,9 @@ class DisplacementMethod(ABC):
     # whether a level may be started from any iterate (auto's take-over of a first contact starts it where the
     # compliance path ended); False where the method predicts from the level's start (newton_condensed)
     starts_anywhere = False
+    # whether a level that starts with no point in contact gets the method's own compliance path (auto then hands
+    # such a level over after Newton's first steps instead of taking Newton's path in the full space)
+    has_path = False
 
     @abstractmethod
     def solve(self, scale: float) -> SolveInfo:

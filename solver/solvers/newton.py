@@ -302,6 +302,7 @@ class NewtonSolver(DisplacementMethod):
         # auto's take-over starts a first contact Newton has not solved (auto.py)
         self.path_end: PETSc.Vec | None = None
         self._path_end = core.problem.u.vector.duplicate() if self.continuation is not None else None
+        self.take_path = True  # False: a first contact Newton's FIRST_STEPS do not solve fails there (auto.py)
 
     @property
     def fallbacks(self) -> int:
@@ -344,7 +345,7 @@ class NewtonSolver(DisplacementMethod):
             reason, first, its = core.plain_newton()
         finally:
             test.max_it = limit
-        if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit:
+        if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit or not self.take_path:
             return reason, first, its
         history = list(first[:its])
         try:

@@ -82,6 +82,30 @@ def test_from_the_level_newton_fails_it_is_newton_condensed(comm):
     assert problem.r.norm() <= model.cfg.solver.rtol * scale
 
 
+def test_a_first_contact_goes_to_the_takeovers_own_path(comm):
+    """configs/moving_contact.toml at P2 (n = 16): level 1 is the first contact (level 0 has no load), which
+    Newton's FIRST_STEPS iterations do not solve. newton_condensed has a compliance path of its own (on the contact
+    dofs), so auto hands the level over there, without Newton's path in the full space (its stages' factorizations
+    were lost with the level): the same solution as newton_condensed's, in fewer iterations and factorizations than
+    Newton's path took (26 and 18 before, 12 and 4 now)."""
+    from solver.solvers.continuation import FIRST_STEPS
+
+    extra = ["discretization.u_degree=2", "time.T=0.02", "output.xdmf=false"]
+    model, rows = _run(comm, "auto", extra, "moving_contact.toml")
+    solver = model.mech.solver
+    assert solver.takeover.has_path and not solver.newton.take_path
+    assert solver.switched_at == 1 and solver.newton.continuation.levels == 0
+    cond_model, ref = _run(comm, "newton_condensed", extra, "moving_contact.toml")
+    condensed_level = ref[1]["newton_iterations"]
+    # Newton's FIRST_STEPS, then the take-over's level from its start; Newton factors K + C once a step, the
+    # take-over K once
+    assert rows[1]["newton_iterations"] == FIRST_STEPS + condensed_level
+    assert rows[1]["factorizations"] == FIRST_STEPS + 1
+    for a, b in zip(rows, ref, strict=True):
+        assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-9, abs=1e-12)
+        assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-9)
+
+
 def test_without_a_fallback_a_failed_level_fails(comm):
     """solver.newton_fallback = false: nothing takes a failed level over, as with Newton."""
     from solver.errors import DisplacementSolveError
