@@ -16,11 +16,14 @@ share Newton's SNES and KSP (:class:`~newton.NewtonCore`). Where there is no ene
 rule), or with ``solver.newton_fallback = false``, there is no take-over: the method is Newton with its own
 fallback setting (a failed level fails where it is off).
 
-A first contact (no point in contact at the level's start) that Newton's first FIRST_STEPS iterations do not solve
-is handed over there, without Newton's compliance path in the full space, where the take-over has a path of its
-own (newton_condensed in 2-D: the path on the contact dofs, no factorization a stage): the full-space path's
-stages were lost with the level, which the take-over solves again from its start (configs/moving_contact.toml at
-P2, n = 32: level 1 from 32 iterations to 23, of which 9 factorizations fewer; docs/model.md §4).
+A first contact (no point in contact at the level's start) after the run's first level that Newton's first
+FIRST_STEPS iterations do not solve is handed over there, without Newton's compliance path in the full space, where
+the take-over has a path of its own (newton_condensed in 2-D: the path on the contact dofs, no factorization a
+stage): where Newton's path does not settle the level its stages are lost with it, and the take-over solves the
+level again from its start (configs/moving_contact.toml at P2, n = 32: level 1, the load arriving after an unloaded
+level 0, from 32 iterations to 23, 9 factorizations fewer). At the run's first level Newton keeps its path: there
+the hand-over also pays S's build for a run that may stay on Newton, and on the Hertz scenes (a one-level run whose
+path Newton settles) it took 1.09 and 1.27 times the time, 12 iterations instead of 10 at P1 (docs/model.md §4).
 """
 
 from __future__ import annotations
@@ -51,8 +54,6 @@ class AutoSolver(DisplacementMethod):
         self.switched_at: int | None = None  # the level (count of levels solved before it) it switched at
         self.levels = 0
         self._start = newton.problem.u.vector.duplicate() if takeover is not None else None
-        if takeover is not None and takeover.has_path:  # a first contact goes to the take-over's own path
-            newton.take_path = False
 
     @property
     def switched(self) -> bool:
@@ -70,6 +71,8 @@ class AutoSolver(DisplacementMethod):
         if self.takeover is None:
             return self.newton.solve(scale)
         u, core = self.newton.problem.u, self.newton.core
+        # a first contact after the run's first level goes to the take-over's own path (module docstring)
+        self.newton.take_path = not (self.takeover.has_path and self.levels > 1)
         u.vector.copy(self._start)
         f0 = core.factorizations
         core.test.growth_limit = GROWTH_STEPS

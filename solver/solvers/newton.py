@@ -302,7 +302,7 @@ class NewtonSolver(DisplacementMethod):
         # auto's take-over starts a first contact Newton has not solved (auto.py)
         self.path_end: PETSc.Vec | None = None
         self._path_end = core.problem.u.vector.duplicate() if self.continuation is not None else None
-        self.take_path = True  # False: a first contact Newton's FIRST_STEPS do not solve fails there (auto.py)
+        self.take_path = True  # False: a first contact Newton's FIRST_STEPS do not solve fails there (auto.py sets it)
 
     @property
     def fallbacks(self) -> int:

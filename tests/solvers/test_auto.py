@@ -87,14 +87,13 @@ def test_a_first_contact_goes_to_the_takeovers_own_path(comm):
     Newton's FIRST_STEPS iterations do not solve. newton_condensed has a compliance path of its own (on the contact
     dofs), so auto hands the level over there, without Newton's path in the full space (its stages' factorizations
     were lost with the level): the same solution as newton_condensed's, in fewer iterations and factorizations than
-    Newton's path took (26 and 18 before, 12 and 4 now)."""
+    Newton's path took (26 and 18 before, 12 and 4 now). At the run's first level Newton keeps its path."""
     from solver.solvers.continuation import FIRST_STEPS
 
     extra = ["discretization.u_degree=2", "time.T=0.02", "output.xdmf=false"]
     model, rows = _run(comm, "auto", extra, "moving_contact.toml")
     solver = model.mech.solver
-    assert solver.takeover.has_path and not solver.newton.take_path
-    assert solver.switched_at == 1 and solver.newton.continuation.levels == 0
+    assert solver.takeover.has_path and solver.switched_at == 1 and solver.newton.continuation.levels == 0
     cond_model, ref = _run(comm, "newton_condensed", extra, "moving_contact.toml")
     condensed_level = ref[1]["newton_iterations"]
     # Newton's FIRST_STEPS, then the take-over's level from its start; Newton factors K + C once a step, the
@@ -104,6 +103,21 @@ def test_a_first_contact_goes_to_the_takeovers_own_path(comm):
     for a, b in zip(rows, ref, strict=True):
         assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-9, abs=1e-12)
         assert a["strain_norm"] == pytest.approx(b["strain_norm"], rel=1e-9)
+
+
+def test_a_first_contact_at_the_runs_first_level_keeps_newtons_path(comm):
+    """Hertz line contact (tests/solvers/test_continuation.py), a one-level run: its first contact is level 0, where
+    Newton keeps its path (the hand-over would pay S's build for it: 1.09 and 1.27 times the time on the Hertz
+    scenes at P1 n = 200 and P2 n = 100) and settles the level without the take-over."""
+    from test_continuation import hertz_line
+
+    from solver.config import from_dict
+
+    model = build_model(from_dict(hertz_line(40)), comm)
+    row = Stepper(model).step(0)
+    solver = model.mech.solver
+    assert solver.takeover.has_path and solver.newton.take_path and not solver.switched
+    assert solver.newton.continuation.levels == 1 and row["factorizations"] == row["newton_iterations"]
 
 
 def test_without_a_fallback_a_failed_level_fails(comm):
