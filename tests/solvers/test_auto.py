@@ -195,7 +195,7 @@ def test_the_level_handed_over_gets_the_fallback_budget():
             raise DisplacementSolveError("SNES", "DIVERGED_MAX_IT", 8, [1.0], 1e-10)
 
     class Takeover:
-        fallbacks, starts_anywhere = 0, False
+        fallbacks, starts_anywhere, has_path = 0, False, False
 
         def __init__(self):
             self.test = SimpleNamespace(max_it=25)
