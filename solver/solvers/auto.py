@@ -19,11 +19,9 @@ fallback setting (a failed level fails where it is off).
 A first contact (no point in contact at the level's start) after the run's first level that Newton's first
 FIRST_STEPS iterations do not solve is handed over there, without Newton's compliance path in the full space, where
 the take-over has a path of its own (newton_condensed in 2-D: the path on the contact dofs, no factorization a
-stage): where Newton's path does not settle the level its stages are lost with it, and the take-over solves the
-level again from its start (configs/moving_contact.toml at P2, n = 32: level 1, the load arriving after an unloaded
-level 0, from 32 iterations to 23, 9 factorizations fewer). At the run's first level Newton keeps its path: there
-the hand-over also pays S's build for a run that may stay on Newton, and on the Hertz scenes (a one-level run whose
-path Newton settles) it took 1.09 and 1.27 times the time, 12 iterations instead of 10 at P1 (docs/model.md §4).
+stage): where Newton's path does not settle the level its stages are lost with it. At the run's first level Newton
+keeps its path: there the hand-over also pays S's build for a run that may stay on Newton (measurements in
+docs/model.md §4).
 """
 
 from __future__ import annotations
