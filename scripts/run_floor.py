@@ -1,0 +1,340 @@
+"""The whole CLI run of Example 1 at n = 128, 200 steps: against a base tree, and split into its parts and floors.
+
+    python scripts/run_floor.py compare [--base /work/base_fbee029] [--rounds 5] [--bytecode] [--name run_floor]
+    python scripts/run_floor.py split [--tree .] [--repeats 3] [--name run_split]
+
+``compare`` runs the whole command a user types, ``python -m solver run configs/example1.toml --set mesh.nx=128
+--set mesh.ny=128 --set time.k=0.005 --no-progress`` (its default outputs: every level written, checkpoints),
+from the base tree and from this one, alternated (base, this, base, this, ...), each a new process started in its
+tree (so that tree's ``solver`` is imported), and reports per tree the median and range of the wall time and of
+the CPU time (user + system of the process), the ratio of the medians and the median and range of the adjacent
+pairs' ratios. ``--bytecode``: the children use Python's bytecode cache, as a user has it, each tree its own cache
+under a temporary ``PYTHONPYCACHEPREFIX`` (filled by one untimed run of each tree first; the base tree is not
+written to); without it, the environment's setting (PYTHONDONTWRITEBYTECODE=1 here: every run compiles the
+project's modules).
+
+``split`` runs the same command from ``--tree`` in a child that times its parts: the interpreter's start, the
+imports, the model's set-up (build_model), the rest of the set-up (scene, directory, writers), level 0 and the
+steps (their wall time less their output), the outputs (every level's ``time_output``), the rest of the run
+(checkpoints, closing the files) and the end (report, MPI's finalize, exit). In the same child, after the run, the
+floors of this tree's model (skipped for a tree whose objects are named otherwise): a step's triangular solve pair
+on the displacement Jacobian, the damage solve, the damage and displacement right-hand sides; level 0's
+factorization of J and of the damage matrix (a new KSP with the same options). And, in new processes, the
+imports every dolfinx program pays (``from mpi4py import MPI; import dolfinx``).
+
+Writes ``NAME.json`` and ``NAME.md`` under ``--out`` (benchmarks/results).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = "configs/example1.toml"
+SETS = ["mesh.nx=128", "mesh.ny=128", "time.k=0.005"]
+
+
+def _cpu() -> float:
+    """User + system seconds of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _env(cache: Path | None) -> dict[str, str]:
+    env = dict(os.environ)
+    if cache is not None:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(cache)
+    return env
+
+
+def _command(out: Path, sets: list[str]) -> list[str]:
+    return [sys.executable, "-m", "solver", "run", SCENE, *(a for s in sets for a in ("--set", s)), "--no-progress",
+            "--overwrite", "--output", str(out)]
+
+
+def _whole(tree: Path, out: Path, sets: list[str], env: dict[str, str]) -> dict[str, float]:
+    """One whole command from ``tree``: wall and CPU seconds, and the time loop's (the CSV's wall_time summed)."""
+    t0, c0 = time.perf_counter(), _cpu()
+    subprocess.run(_command(out, sets), cwd=tree, check=True, capture_output=True, env=env)
+    wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    rows = list(csv.DictReader(open(out / "timeseries.csv")))
+    return {"wall": wall, "cpu": cpu, "loop": sum(float(r["wall_time"]) for r in rows)}
+
+
+def _stats(values: list[float]) -> dict[str, float]:
+    return {"median": statistics.median(values), "min": min(values), "max": max(values)}
+
+
+def compare(args: argparse.Namespace) -> int:
+    trees = {"base": args.base.resolve(), "this": ROOT}
+    for name, tree in trees.items():
+        probe = subprocess.run([sys.executable, "-c", "import solver; print(solver.__file__)"], cwd=tree,
+                               check=True, capture_output=True, text=True, env=_env(None)).stdout.strip()
+        if not probe.startswith(str(tree)):
+            raise SystemExit(f"{tree}: imports {probe}, not its own solver")
+    runs: dict[str, list[dict]] = {name: [] for name in trees}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        envs = {name: _env(tmp / f"pycache-{name}" if args.bytecode else None) for name in trees}
+        if args.bytecode:
+            for name, tree in trees.items():
+                _whole(tree, tmp / f"warm-{name}", args.sets, envs[name])
+        for i in range(args.rounds):
+            for name, tree in trees.items():
+                runs[name].append(_whole(tree, tmp / f"{name}{i}", args.sets, envs[name]))
+                print(name, i, {k: round(v, 3) for k, v in runs[name][-1].items()}, os.getloadavg()[0], flush=True)
+        rows_equal = _csv_equal(tmp / "base0" / "timeseries.csv", tmp / "this0" / "timeseries.csv")
+    result = {"base": str(trees["base"]), "base_rev": _rev(trees["base"]), "this_rev": _rev(ROOT),
+              "sets": args.sets, "rounds": args.rounds, "bytecode": args.bytecode,
+              "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "runs": runs, "csv": rows_equal,
+              "stats": {name: {key: _stats([r[key] for r in rs]) for key in rs[0]} for name, rs in runs.items()},
+              "pairs": {key: _stats([a[key] / b[key] for a, b in zip(runs["this"], runs["base"])])
+                        for key in runs["this"][0]}}
+    _write(args, result, _compare_table(result, args.name))
+    return 0
+
+
+def _rev(tree: Path) -> str:
+    res = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=tree, capture_output=True, text=True)
+    return res.stdout.strip() or "?"
+
+
+def _csv_equal(a: Path, b: Path) -> dict[str, float]:
+    """The largest relative difference of each shared non-time column of two time series (0: equal)."""
+    ra, rb = list(csv.DictReader(open(a))), list(csv.DictReader(open(b)))
+    out = {}
+    for col in ra[0]:
+        if col.startswith("time_") or col == "wall_time" or col not in rb[0] or len(ra) != len(rb):
+            continue
+        x = [float(r[col]) for r in ra]
+        y = [float(r[col]) for r in rb]
+        scale = max(abs(v) for v in x) or 1.0
+        out[col] = max(abs(p - q) for p, q in zip(x, y)) / scale
+    return out
+
+
+def _compare_table(r: dict, name: str) -> str:
+    sets = " ".join(f"--set {s}" for s in r["sets"])
+    s, p = r["stats"], r["pairs"]
+    lines = [f"# The whole run of {SCENE} {sets} (one rank): this tree against {r['base_rev']}", "",
+             f"`python scripts/run_floor.py compare --base {r['base']} --rounds {r['rounds']}"
+             f"{' --bytecode' if r['bytecode'] else ''} --name {name}`: this = {r['this_rev']}, base = "
+             f"{r['base_rev']} (run from {r['base']}); {r['rounds']} rounds, alternated (base, this), each a new "
+             f"process; Python's bytecode cache: {'used, one per tree' if r['bytecode'] else 'off (compiled at every run)'}; "
+             f"load average at the end {r['load']} (2 cores, shared). Seconds: median [min, max].", "",
+             "| | base | this | this / base (medians) | pairs' ratios: median [min, max] |", "|---|---|---|---|---|"]
+    for label, key in (("whole command, wall", "wall"), ("whole command, CPU (user + system)", "cpu"),
+                       ("time loop (the CSV's wall_time summed)", "loop")):
+        b, a, q = s["base"][key], s["this"][key], p[key]
+        lines.append(f"| {label} | {b['median']:.2f} [{b['min']:.2f}, {b['max']:.2f}] | {a['median']:.2f} "
+                     f"[{a['min']:.2f}, {a['max']:.2f}] | {a['median'] / b['median']:.3f} | {q['median']:.3f} "
+                     f"[{q['min']:.3f}, {q['max']:.3f}] |")
+    worst = max(r["csv"].items(), key=lambda kv: kv[1]) if r["csv"] else ("-", 0.0)
+    lines += ["", f"The time series of the first round, every shared column but the times: largest relative "
+              f"difference {worst[1]:.1e} ({worst[0]}).", ""]
+    return "\n".join(lines)
+
+
+# the child of ``split``: the CLI run, its parts timed, then the floors of the model it built
+CHILD = r"""
+import json, sys, time
+T = {"first_line": time.time()}
+import solver.run.model as _m
+_build = _m.build_model
+B = {"build": 0.0, "model": None}
+def build_model(*a, **k):
+    t = time.perf_counter(); model = _build(*a, **k); B["build"] += time.perf_counter() - t; B["model"] = model
+    return model
+_m.build_model = build_model
+import solver.cli, solver.io.results as _r
+T["imported"] = time.time()
+_run = _r.run
+def run(*a, **k):
+    T["run_start"] = time.time(); rows = _run(*a, **k); T["run_end"] = time.time(); return rows
+_r.run = run
+T["main_start"] = time.time()
+solver.cli.main(sys.argv[2:])
+T["main_end"] = time.time()
+T["build"] = B["build"]
+floors = {}
+try:
+    import floor_probe
+    floors = floor_probe.floors(B["model"])
+except Exception as exc:  # another tree's objects: no floors
+    floors = {"error": repr(exc)}
+T["floors"] = floors
+T["floors_done"] = time.time()
+open(sys.argv[1], "w").write(json.dumps(T))
+"""
+
+# the floors, imported by the child from this script's folder (this tree's object names)
+FLOORS = r"""
+import time
+import numpy as np
+from petsc4py import PETSc
+
+def _best(f, n=20):
+    times = []
+    for _ in range(n):
+        t = time.perf_counter(); f(); times.append(time.perf_counter() - t)
+    return float(np.median(times))
+
+def _factor(A, options):
+    ksp = PETSc.KSP().create(A.getComm())
+    ksp.setOperators(A, A)
+    ksp.setType(options.get("ksp_type", "preonly"))
+    pc = ksp.getPC(); pc.setType(options["pc_type"]); pc.setFactorSolverType(options["pc_factor_mat_solver_type"])
+    pc.setFactorOrdering(options["pc_factor_mat_ordering_type"])
+    t = time.perf_counter(); ksp.setUp(); return time.perf_counter() - t, ksp
+
+def floors(model):
+    from solver.solvers.linear import direct_options
+    mech, damage = model.mech, model.damage
+    ksp = mech.solver.core.ksp
+    b, x = mech.ops.b.duplicate(), mech.ops.b.duplicate()
+    mech.ops.b.copy(b)
+    out = {"displacement_solve": _best(lambda: ksp.solve(b, x))}
+    out["damage_solve"] = _best(lambda: damage.ksp.solve(damage.b, damage.x))
+    out["damage_rhs"] = _best(damage.assemble_rhs)
+    t = model.cfg.time.T
+    out["displacement_rhs"] = _best(lambda: mech.ops.assemble_rhs(t))
+    opts = direct_options(model.comm, "petsc")
+    J = mech.problem.J.copy()
+    out["factor_J"], k1 = _factor(J, opts)
+    out["solve_J_fresh"] = _best(lambda: k1.solve(b, x))
+    out["factor_damage"], k2 = _factor(damage.A.copy(), opts)
+    out["step_floor"] = (out["displacement_solve"] + out["damage_solve"] + out["damage_rhs"] + out["displacement_rhs"])
+    out["dofs"] = mech.problem.J.getSize()[0]
+    return out
+"""
+
+
+def split(args: argparse.Namespace) -> int:
+    tree = args.tree.resolve()
+    reps: list[dict] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        (tmp / "floor_probe.py").write_text(FLOORS)
+        env = _env(None)
+        env["PYTHONPATH"] = str(tmp) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        for i in range(args.repeats):
+            out, record = tmp / f"run{i}", tmp / f"times{i}.json"
+            cmd = [sys.executable, "-c", CHILD, str(record), "run", SCENE, *(a for s in args.sets for a in ("--set", s)),
+                   "--no-progress", "--overwrite", "--output", str(out)]
+            start, c0 = time.time(), _cpu()
+            subprocess.run(cmd, cwd=tree, check=True, capture_output=True, env=env)
+            end, cpu = time.time(), _cpu() - c0
+            T = json.loads(record.read_text())
+            rows = list(csv.DictReader(open(out / "timeseries.csv")))
+            output = sum(float(r["time_output"]) for r in rows)
+            loop = sum(float(r["wall_time"]) for r in rows)
+            level0 = float(rows[0]["wall_time"]) - float(rows[0]["time_output"])
+            steps = loop - output - level0
+            parts = {
+                "interpreter": T["first_line"] - start,
+                "imports": T["imported"] - T["first_line"],
+                "build_model": T["build"],
+                "other set-up": T["run_start"] - T["main_start"] - T["build"],
+                "level 0": level0, "steps": steps, "outputs": output,
+                "rest of the run (checkpoints, closing)": T["run_end"] - T["run_start"] - loop,
+                "end (report, exit)": T["main_end"] - T["run_end"],
+            }
+            # the floors are measured in the child after the run: its time is left out of the whole
+            parts["exit (MPI finalize)"] = end - T["floors_done"]
+            rep = {"total": end - start - (T["floors_done"] - T["main_end"]), "cpu": cpu, "parts": parts, "floors": T["floors"], "steps_n": len(rows) - 1}
+            rep["imports_floor"] = _imports_floor(tree, env)
+            reps.append(rep)
+            print(i, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in parts.items()}),
+                  flush=True)
+    result = {"tree": str(tree), "rev": _rev(tree), "sets": args.sets, "repeats": args.repeats,
+              "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "reps": reps}
+    _write(args, result, _split_table(result, args.name))
+    return 0
+
+
+def _imports_floor(tree: Path, env: dict[str, str]) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "from mpi4py import MPI; import dolfinx, dolfinx.fem.petsc"], cwd=tree,
+                   check=True, capture_output=True, env=env)
+    return time.perf_counter() - t0
+
+
+def _split_table(r: dict, name: str) -> str:
+    reps = r["reps"]
+    med = {k: statistics.median(rep["parts"][k] for rep in reps) for k in reps[0]["parts"]}
+    total = statistics.median(rep["total"] for rep in reps)
+    sets = " ".join(f"--set {s}" for s in r["sets"])
+    n = reps[0]["steps_n"]
+    lines = [f"# The whole run of {SCENE} {sets} (one rank), split", "",
+             f"`python scripts/run_floor.py split --repeats {r['repeats']} --name {name}` at {r['rev']} ({r['tree']});"
+             f" {r['repeats']} runs, medians in seconds; load average at the end {r['load']} (2 cores, shared).", "",
+             "| part | seconds | share |", "|---|---|---|"]
+    lines += [f"| {k} | {v:.3f} | {v / total:.0%} |" for k, v in med.items()]
+    lines += [f"| whole process (wall; the floors' time, measured after the run, left out) | {total:.3f} | |", ""]
+    fl = [rep["floors"] for rep in reps if "error" not in rep["floors"]]
+    imp_floor = statistics.median(rep["imports_floor"] for rep in reps)
+    lines += [f"Start-up floor: a process that only does `from mpi4py import MPI; import dolfinx, dolfinx.fem.petsc` "
+              f"{imp_floor:.3f} s (the interpreter, MPI and dolfinx; against interpreter + imports "
+              f"{med['interpreter'] + med['imports']:.3f} s here).", ""]
+    if fl:
+        f = {k: statistics.median(x[k] for x in fl) for k in fl[0] if isinstance(fl[0][k], float)}
+        step = med["steps"] / n
+        lines += [f"The floors of the model ({fl[0]['dofs']:,} displacement dofs), timed in the run's process after it "
+                  "(medians of 20 calls each, ms):", "",
+                  "| piece | ms |", "|---|---|",
+                  f"| the displacement's triangular solve pair (the factored J) | {1e3 * f['displacement_solve']:.2f} |",
+                  f"| the damage solve (its factored matrix) | {1e3 * f['damage_solve']:.2f} |",
+                  f"| the damage right-hand side | {1e3 * f['damage_rhs']:.2f} |",
+                  f"| the displacement right-hand side (loads, memory term) | {1e3 * f['displacement_rhs']:.2f} |",
+                  f"| **a step's floor** (their sum) | **{1e3 * f['step_floor']:.2f}** |",
+                  f"| a step of the run (steps less their output, / {n}) | {1e3 * step:.2f} |",
+                  f"| a step's output (outputs / {n + 1} levels) | {1e3 * med['outputs'] / (n + 1):.2f} |",
+                  f"| level 0's floor: one Cholesky factorization of J (nd ordering) | {1e3 * f['factor_J']:.1f} |",
+                  f"| the damage matrix's factorization | {1e3 * f['factor_damage']:.1f} |",
+                  f"| level 0 of the run | {1e3 * med['level 0']:.1f} |", ""]
+    else:
+        lines += [f"No floors for this tree ({reps[0]['floors'].get('error')}).", ""]
+    return "\n".join(lines)
+
+
+def _write(args: argparse.Namespace, result: dict, text: str) -> None:
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{args.name}.json").write_text(json.dumps(result, indent=1) + "\n")
+    (args.out / f"{args.name}.md").write_text(text)
+    print(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="what", required=True)
+    c = sub.add_parser("compare", help="this tree against a base tree, alternated")
+    c.add_argument("--base", type=Path, default=Path("/work/base_fbee029"))
+    c.add_argument("--rounds", type=int, default=5)
+    c.add_argument("--bytecode", action="store_true", help="a bytecode cache per tree (as a user has it)")
+    c.add_argument("--name", default="run_floor")
+    s = sub.add_parser("split", help="one tree's run split into its parts, and its floors")
+    s.add_argument("--tree", type=Path, default=ROOT)
+    s.add_argument("--repeats", type=int, default=3)
+    s.add_argument("--name", default="run_split")
+    for q in (c, s):
+        q.add_argument("--set", dest="sets", action="append", metavar="SECTION.KEY=VALUE",
+                       help=f"scene overrides (default: {' '.join(SETS)})")
+        q.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    args = p.parse_args(argv)
+    args.sets = args.sets or SETS
+    return compare(args) if args.what == "compare" else split(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
