@@ -78,7 +78,7 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 def compare(args: argparse.Namespace) -> int:
     trees = {"base": args.base.resolve(), "this": ROOT}
-    for name, tree in trees.items():
+    for tree in trees.values():
         probe = subprocess.run([sys.executable, "-c", "import solver; print(solver.__file__)"], cwd=tree,
                                check=True, capture_output=True, text=True, env=_env(None)).stdout.strip()
         if not probe.startswith(str(tree)):
@@ -188,15 +188,18 @@ def _best(f, n=20):
     times = []
     for _ in range(n):
         t = time.perf_counter(); f(); times.append(time.perf_counter() - t)
-    return float(np.median(times))
+    return float(np.min(times))  # a floor: the best of n (the machine is shared)
 
-def _factor(A, options):
-    ksp = PETSc.KSP().create(A.getComm())
-    ksp.setOperators(A, A)
-    ksp.setType(options.get("ksp_type", "preonly"))
-    pc = ksp.getPC(); pc.setType(options["pc_type"]); pc.setFactorSolverType(options["pc_factor_mat_solver_type"])
-    pc.setFactorOrdering(options["pc_factor_mat_ordering_type"])
-    t = time.perf_counter(); ksp.setUp(); return time.perf_counter() - t, ksp
+def _factor(A, options, n=3):
+    best, ksp = float("inf"), None
+    for _ in range(n):  # the best of n new factorizations (symbolic and numeric)
+        ksp = PETSc.KSP().create(A.getComm())
+        ksp.setOperators(A, A)
+        ksp.setType(options.get("ksp_type", "preonly"))
+        pc = ksp.getPC(); pc.setType(options["pc_type"]); pc.setFactorSolverType(options["pc_factor_mat_solver_type"])
+        pc.setFactorOrdering(options["pc_factor_mat_ordering_type"])
+        t = time.perf_counter(); ksp.setUp(); best = min(best, time.perf_counter() - t)
+    return best, ksp
 
 def floors(model):
     from solver.solvers.linear import direct_options
@@ -252,7 +255,8 @@ def split(args: argparse.Namespace) -> int:
             }
             # the floors are measured in the child after the run: its time is left out of the whole
             parts["exit (MPI finalize)"] = end - T["floors_done"]
-            rep = {"total": end - start - (T["floors_done"] - T["main_end"]), "cpu": cpu, "parts": parts, "floors": T["floors"], "steps_n": len(rows) - 1}
+            rep = {"total": end - start - (T["floors_done"] - T["main_end"]), "cpu": cpu, "parts": parts,
+                   "floors": T["floors"], "steps_n": len(rows) - 1}
             rep["imports_floor"] = _imports_floor(tree, env)
             reps.append(rep)
             print(i, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in parts.items()}),
@@ -291,7 +295,7 @@ def _split_table(r: dict, name: str) -> str:
         f = {k: statistics.median(x[k] for x in fl) for k in fl[0] if isinstance(fl[0][k], float)}
         step = med["steps"] / n
         lines += [f"The floors of the model ({fl[0]['dofs']:,} displacement dofs), timed in the run's process after it "
-                  "(medians of 20 calls each, ms):", "",
+                  "(the best of 20 calls each, of 3 factorizations; ms):", "",
                   "| piece | ms |", "|---|---|",
                   f"| the displacement's triangular solve pair (the factored J) | {1e3 * f['displacement_solve']:.2f} |",
                   f"| the damage solve (its factored matrix) | {1e3 * f['damage_solve']:.2f} |",
