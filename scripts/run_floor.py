@@ -149,32 +149,45 @@ def _compare_table(r: dict, name: str) -> str:
 # the child of ``split``: the CLI run, its parts timed, then the floors of the model it built
 CHILD = r"""
 import json, sys, time
-T = {"first_line": time.time()}
+def now():
+    return [time.time(), time.process_time()]
+T = {"first_line": now()}
+P = {}  # part -> [wall, cpu] summed
+def timed(owner, name, key):
+    inner = getattr(owner, name)
+    def wrapper(*a, **k):
+        w, c = time.perf_counter(), time.process_time()
+        try:
+            return inner(*a, **k)
+        finally:
+            part = key(a) if callable(key) else key
+            acc = P.setdefault(part, [0.0, 0.0])
+            acc[0] += time.perf_counter() - w; acc[1] += time.process_time() - c
+    setattr(owner, name, wrapper)
 import solver.run.model as _m
+MODEL = []
 _build = _m.build_model
-B = {"build": 0.0, "model": None}
 def build_model(*a, **k):
-    t = time.perf_counter(); model = _build(*a, **k); B["build"] += time.perf_counter() - t; B["model"] = model
-    return model
+    MODEL.append(_build(*a, **k)); return MODEL[-1]
 _m.build_model = build_model
-import solver.cli, solver.io.results as _r
-T["imported"] = time.time()
-_run = _r.run
-def run(*a, **k):
-    T["run_start"] = time.time(); rows = _run(*a, **k); T["run_end"] = time.time(); return rows
-_r.run = run
-T["main_start"] = time.time()
+timed(_m, "build_model", "build_model")
+import solver.cli, solver.io.results as _r, solver.run.stepper as _s, solver.io.checkpoint as _c
+T["imported"] = now()
+timed(_s.Stepper, "step", lambda a: "level 0" if a[1] == 0 else "steps")
+timed(_r._Writers, "level", "outputs")
+timed(_c, "write", "checkpoints")
+timed(_r, "run", "run")
 solver.cli.main(sys.argv[2:])
-T["main_end"] = time.time()
-T["build"] = B["build"]
+T["main_end"] = now()
+T["parts"] = P
 floors = {}
 try:
     import floor_probe
-    floors = floor_probe.floors(B["model"])
+    floors = floor_probe.floors(MODEL[-1])
 except Exception as exc:  # another tree's objects: no floors
     floors = {"error": repr(exc)}
 T["floors"] = floors
-T["floors_done"] = time.time()
+T["floors_done"] = now()
 open(sys.argv[1], "w").write(json.dumps(T))
 """
 
@@ -187,8 +200,8 @@ from petsc4py import PETSc
 def _best(f, n=20):
     times = []
     for _ in range(n):
-        t = time.perf_counter(); f(); times.append(time.perf_counter() - t)
-    return float(np.min(times))  # a floor: the best of n (the machine is shared)
+        t = time.process_time(); f(); times.append(time.process_time() - t)
+    return float(np.min(times))  # a floor: the best of n, in CPU time (the machine is shared)
 
 def _factor(A, options, n=3):
     best, ksp = float("inf"), None
@@ -198,7 +211,7 @@ def _factor(A, options, n=3):
         ksp.setType(options.get("ksp_type", "preonly"))
         pc = ksp.getPC(); pc.setType(options["pc_type"]); pc.setFactorSolverType(options["pc_factor_mat_solver_type"])
         pc.setFactorOrdering(options["pc_factor_mat_ordering_type"])
-        t = time.perf_counter(); ksp.setUp(); best = min(best, time.perf_counter() - t)
+        t = time.process_time(); ksp.setUp(); best = min(best, time.process_time() - t)
     return best, ksp
 
 def floors(model):
@@ -229,9 +242,9 @@ def split(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         (tmp / "floor_probe.py").write_text(FLOORS)
-        env = _env(None)
+        env = _env(tmp / "pycache" if args.bytecode else None)
         env["PYTHONPATH"] = str(tmp) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        for i in range(args.repeats):
+        for i in range(-1 if args.bytecode else 0, args.repeats):  # -1: the untimed run that fills the cache
             out, record = tmp / f"run{i}", tmp / f"times{i}.json"
             cmd = [sys.executable, "-c", CHILD, str(record), "run", SCENE, *(a for s in args.sets for a in ("--set", s)),
                    "--no-progress", "--overwrite", "--output", str(out)]
@@ -239,29 +252,31 @@ def split(args: argparse.Namespace) -> int:
             subprocess.run(cmd, cwd=tree, check=True, capture_output=True, env=env)
             end, cpu = time.time(), _cpu() - c0
             T = json.loads(record.read_text())
-            rows = list(csv.DictReader(open(out / "timeseries.csv")))
-            output = sum(float(r["time_output"]) for r in rows)
-            loop = sum(float(r["wall_time"]) for r in rows)
-            level0 = float(rows[0]["wall_time"]) - float(rows[0]["time_output"])
-            steps = loop - output - level0
-            parts = {
-                "interpreter": T["first_line"] - start,
-                "imports": T["imported"] - T["first_line"],
-                "build_model": T["build"],
-                "other set-up": T["run_start"] - T["main_start"] - T["build"],
-                "level 0": level0, "steps": steps, "outputs": output,
-                "rest of the run (checkpoints, closing)": T["run_end"] - T["run_start"] - loop,
-                "end (report, exit)": T["main_end"] - T["run_end"],
+            P = T["parts"]
+            zero = [0.0, 0.0]
+            inside = [P["run"][i] - sum(P.get(k, zero)[i] for k in ("level 0", "steps", "outputs", "checkpoints"))
+                      for i in (0, 1)]
+            main = [T["main_end"][i] - T["imported"][i] for i in (0, 1)]
+            parts = {  # [wall, cpu]
+                "interpreter and site": [T["first_line"][0] - start, T["first_line"][1]],
+                "imports": [T["imported"][i] - T["first_line"][i] for i in (0, 1)],
+                "build_model": P["build_model"],
+                "other set-up (scene, directory, writers' opening) and the report":
+                    [main[i] - P["run"][i] - P["build_model"][i] + inside[i] for i in (0, 1)],
+                "level 0": P["level 0"], "steps": P["steps"], "outputs (every level)": P["outputs"],
+                "checkpoints": P.get("checkpoints", zero),
             }
-            # the floors are measured in the child after the run: its time is left out of the whole
-            parts["exit (MPI finalize)"] = end - T["floors_done"]
-            rep = {"total": end - start - (T["floors_done"] - T["main_end"]), "cpu": cpu, "parts": parts,
+            rows = list(csv.DictReader(open(out / "timeseries.csv")))
+            wall_total = end - start - (T["floors_done"][0] - T["main_end"][0])
+            parts["exit (MPI finalize)"] = [end - T["floors_done"][0], cpu - T["floors_done"][1]]
+            rep = {"total": wall_total, "cpu": cpu - (T["floors_done"][1] - T["main_end"][1]), "parts": parts,
                    "floors": T["floors"], "steps_n": len(rows) - 1}
             rep["imports_floor"] = _imports_floor(tree, env)
+            if i < 0:
+                continue
             reps.append(rep)
-            print(i, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in parts.items()}),
-                  flush=True)
-    result = {"tree": str(tree), "rev": _rev(tree), "sets": args.sets, "repeats": args.repeats,
+            print(i, json.dumps({k: [round(x, 3) for x in v] for k, v in parts.items()}), flush=True)
+    result = {"tree": str(tree), "rev": _rev(tree), "sets": args.sets, "repeats": args.repeats, "bytecode": args.bytecode,
               "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "reps": reps}
     _write(args, result, _split_table(result, args.name))
     return 0
@@ -276,37 +291,41 @@ def _imports_floor(tree: Path, env: dict[str, str]) -> float:
 
 def _split_table(r: dict, name: str) -> str:
     reps = r["reps"]
-    med = {k: statistics.median(rep["parts"][k] for rep in reps) for k in reps[0]["parts"]}
-    total = statistics.median(rep["total"] for rep in reps)
+    med = {k: [statistics.median(rep["parts"][k][i] for rep in reps) for i in (0, 1)] for k in reps[0]["parts"]}
+    total = [statistics.median(rep["total"] for rep in reps), statistics.median(rep["cpu"] for rep in reps)]
     sets = " ".join(f"--set {s}" for s in r["sets"])
     n = reps[0]["steps_n"]
     lines = [f"# The whole run of {SCENE} {sets} (one rank), split", "",
-             f"`python scripts/run_floor.py split --repeats {r['repeats']} --name {name}` at {r['rev']} ({r['tree']});"
-             f" {r['repeats']} runs, medians in seconds; load average at the end {r['load']} (2 cores, shared).", "",
-             "| part | seconds | share |", "|---|---|---|"]
-    lines += [f"| {k} | {v:.3f} | {v / total:.0%} |" for k, v in med.items()]
-    lines += [f"| whole process (wall; the floors' time, measured after the run, left out) | {total:.3f} | |", ""]
+             f"`python scripts/run_floor.py split --tree {r['tree']} --repeats {r['repeats']}"
+             f"{' --bytecode' if r['bytecode'] else ''} --name {name}` at {r['rev']}; Python's bytecode cache "
+             f"{'used (its own, filled by an untimed run)' if r['bytecode'] else 'as the environment says'}; "
+             f"{r['repeats']} runs, medians in seconds, wall and CPU (user + system of the process; "
+             f"process_time inside it); load average at the end {r['load']} (2 cores, shared).", "",
+             "| part | wall | CPU | share of the CPU |", "|---|---|---|---|"]
+    lines += [f"| {k} | {w:.3f} | {c:.3f} | {c / total[1]:.0%} |" for k, (w, c) in med.items()]
+    lines += [f"| whole process (the floors' time, measured after the run, left out) | {total[0]:.3f} | "
+              f"{total[1]:.3f} | |", ""]
     fl = [rep["floors"] for rep in reps if "error" not in rep["floors"]]
     imp_floor = statistics.median(rep["imports_floor"] for rep in reps)
     lines += [f"Start-up floor: a process that only does `from mpi4py import MPI; import dolfinx, dolfinx.fem.petsc` "
-              f"{imp_floor:.3f} s (the interpreter, MPI and dolfinx; against interpreter + imports "
-              f"{med['interpreter'] + med['imports']:.3f} s here).", ""]
+              f"{imp_floor:.3f} s wall (the interpreter, MPI and dolfinx; against interpreter + imports "
+              f"{med['interpreter and site'][0] + med['imports'][0]:.3f} s here).", ""]
     if fl:
         f = {k: statistics.median(x[k] for x in fl) for k in fl[0] if isinstance(fl[0][k], float)}
-        step = med["steps"] / n
+        step = med["steps"][1] / n
         lines += [f"The floors of the model ({fl[0]['dofs']:,} displacement dofs), timed in the run's process after it "
-                  "(the best of 20 calls each, of 3 factorizations; ms):", "",
+                  "(CPU time, the best of 20 calls each, of 3 factorizations; ms):", "",
                   "| piece | ms |", "|---|---|",
                   f"| the displacement's triangular solve pair (the factored J) | {1e3 * f['displacement_solve']:.2f} |",
                   f"| the damage solve (its factored matrix) | {1e3 * f['damage_solve']:.2f} |",
                   f"| the damage right-hand side | {1e3 * f['damage_rhs']:.2f} |",
                   f"| the displacement right-hand side (loads, memory term) | {1e3 * f['displacement_rhs']:.2f} |",
                   f"| **a step's floor** (their sum) | **{1e3 * f['step_floor']:.2f}** |",
-                  f"| a step of the run (steps less their output, / {n}) | {1e3 * step:.2f} |",
-                  f"| a step's output (outputs / {n + 1} levels) | {1e3 * med['outputs'] / (n + 1):.2f} |",
+                  f"| a step of the run (CPU of the steps, output not counted, / {n}) | {1e3 * step:.2f} |",
+                  f"| a level's output (CPU / {n + 1} levels) | {1e3 * med['outputs (every level)'][1] / (n + 1):.2f} |",
                   f"| level 0's floor: one Cholesky factorization of J (nd ordering) | {1e3 * f['factor_J']:.1f} |",
                   f"| the damage matrix's factorization | {1e3 * f['factor_damage']:.1f} |",
-                  f"| level 0 of the run | {1e3 * med['level 0']:.1f} |", ""]
+                  f"| level 0 of the run (CPU) | {1e3 * med['level 0'][1]:.1f} |", ""]
     else:
         lines += [f"No floors for this tree ({reps[0]['floors'].get('error')}).", ""]
     return "\n".join(lines)
@@ -331,6 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--tree", type=Path, default=ROOT)
     s.add_argument("--repeats", type=int, default=3)
     s.add_argument("--name", default="run_split")
+    s.add_argument("--bytecode", action="store_true", help="a bytecode cache of its own (as a user has it)")
     for q in (c, s):
         q.add_argument("--set", dest="sets", action="append", metavar="SECTION.KEY=VALUE",
                        help=f"scene overrides (default: {' '.join(SETS)})")
