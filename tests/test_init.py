@@ -8,6 +8,8 @@ import pytest
 
 import solver
 
+pytestmark = pytest.mark.serial  # no MPI here: on 2 ranks each would run the same checks again
+
 
 @pytest.mark.parametrize("name", ["fenics-ufl", "fenics-ffcx", "numpy", "mpi4py"])
 def test_installed_version_is_importlib_metadata_s(name):
