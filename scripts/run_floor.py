@@ -63,13 +63,22 @@ def _command(out: Path, sets: list[str]) -> list[str]:
             "--overwrite", "--output", str(out)]
 
 
+def _waits() -> tuple[int, int, int]:
+    """Voluntary context switches (waits: the disk, a sleep), involuntary ones (taken off the core by other work) and
+    blocks written, of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_nvcsw, r.ru_nivcsw, r.ru_oublock
+
+
 def _whole(tree: Path, out: Path, sets: list[str], env: dict[str, str]) -> dict[str, float]:
-    """One whole command from ``tree``: wall and CPU seconds, and the time loop's (the CSV's wall_time summed)."""
-    t0, c0 = time.perf_counter(), _cpu()
+    """One whole command from ``tree``: wall and CPU seconds, the time loop's (the CSV's wall_time summed), and its
+    voluntary and involuntary context switches and blocks written."""
+    t0, c0, w0 = time.perf_counter(), _cpu(), _waits()
     subprocess.run(_command(out, sets), cwd=tree, check=True, capture_output=True, env=env)
-    wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    wall, cpu, w1 = time.perf_counter() - t0, _cpu() - c0, _waits()
     rows = list(csv.DictReader(open(out / "timeseries.csv")))
-    return {"wall": wall, "cpu": cpu, "loop": sum(float(r["wall_time"]) for r in rows)}
+    return {"wall": wall, "cpu": cpu, "loop": sum(float(r["wall_time"]) for r in rows),
+            "voluntary_switches": w1[0] - w0[0], "involuntary_switches": w1[1] - w0[1], "blocks_written": w1[2] - w0[2]}
 
 
 def _stats(values: list[float]) -> dict[str, float]:
@@ -99,7 +108,7 @@ def compare(args: argparse.Namespace) -> int:
               "sets": args.sets, "rounds": args.rounds, "bytecode": args.bytecode,
               "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "runs": runs, "csv": rows_equal,
               "stats": {name: {key: _stats([r[key] for r in rs]) for key in rs[0]} for name, rs in runs.items()},
-              "pairs": {key: _stats([a[key] / b[key] for a, b in zip(runs["this"], runs["base"])])
+              "pairs": {key: _stats([a[key] / max(b[key], 1e-300) for a, b in zip(runs["this"], runs["base"])])
                         for key in runs["this"][0]}}
     _write(args, result, _compare_table(result, args.name))
     return 0
@@ -135,11 +144,17 @@ def _compare_table(r: dict, name: str) -> str:
              f"load average at the end {r['load']} (2 cores, shared). Seconds: median [min, max].", "",
              "| | base | this | this / base (medians) | pairs' ratios: median [min, max] |", "|---|---|---|---|---|"]
     for label, key in (("whole command, wall", "wall"), ("whole command, CPU (user + system)", "cpu"),
-                       ("time loop (the CSV's wall_time summed)", "loop")):
+                       ("time loop (the CSV's wall_time summed)", "loop"),
+                       ("voluntary context switches (waits)", "voluntary_switches"),
+                       ("involuntary context switches (other work)", "involuntary_switches"),
+                       ("blocks written", "blocks_written")):
+        if key not in s["base"]:
+            continue
         b, a, q = s["base"][key], s["this"][key], p[key]
-        lines.append(f"| {label} | {b['median']:.2f} [{b['min']:.2f}, {b['max']:.2f}] | {a['median']:.2f} "
-                     f"[{a['min']:.2f}, {a['max']:.2f}] | {a['median'] / b['median']:.3f} | {q['median']:.3f} "
-                     f"[{q['min']:.3f}, {q['max']:.3f}] |")
+        fmt = ".2f" if key in ("wall", "cpu", "loop") else ".0f"
+        lines.append(f"| {label} | {b['median']:{fmt}} [{b['min']:{fmt}}, {b['max']:{fmt}}] | {a['median']:{fmt}} "
+                     f"[{a['min']:{fmt}}, {a['max']:{fmt}}] | {a['median'] / max(b['median'], 1e-300):.3f} | "
+                     f"{q['median']:.3f} [{q['min']:.3f}, {q['max']:.3f}] |")
     worst = max(r["csv"].items(), key=lambda kv: kv[1]) if r["csv"] else ("-", 0.0)
     lines += ["", f"The time series of the first round, every shared column but the times: largest relative "
               f"difference {worst[1]:.1e} ({worst[0]}).", ""]
@@ -231,6 +246,16 @@ def floors(model):
     out["solve_J_fresh"] = _best(lambda: k1.solve(b, x))
     out["factor_damage"], k2 = _factor(damage.A.copy(), opts)
     out["step_floor"] = (out["displacement_solve"] + out["damage_solve"] + out["damage_rhs"] + out["displacement_rhs"])
+    # the same four one after the other, as a step does them (each finds the caches as the others left them)
+    pieces = {"damage_rhs": damage.assemble_rhs, "damage_solve": lambda: damage.ksp.solve(damage.b, damage.x),
+              "displacement_rhs": lambda: mech.ops.assemble_rhs(t), "displacement_solve": lambda: ksp.solve(b, x)}
+    seq = {name: [] for name in pieces}
+    for _ in range(20):
+        for name, f in pieces.items():
+            c = time.process_time(); f(); seq[name].append(time.process_time() - c)
+    for name, times in seq.items():
+        out["in_sequence_" + name] = float(np.median(times))
+    out["step_in_sequence"] = sum(out["in_sequence_" + name] for name in pieces)
     out["dofs"] = mech.problem.J.getSize()[0]
     return out
 """
@@ -283,10 +308,15 @@ def split(args: argparse.Namespace) -> int:
 
 
 def _imports_floor(tree: Path, env: dict[str, str]) -> float:
-    t0 = time.perf_counter()
+    """CPU seconds of a process that imports what every dolfinx program imports."""
+    c0 = _cpu()
     subprocess.run([sys.executable, "-c", "from mpi4py import MPI; import dolfinx, dolfinx.fem.petsc"], cwd=tree,
                    check=True, capture_output=True, env=env)
-    return time.perf_counter() - t0
+    return _cpu() - c0
+
+
+SEQUENCE = ("in_sequence_displacement_solve", "in_sequence_damage_solve", "in_sequence_damage_rhs",
+            "in_sequence_displacement_rhs")
 
 
 def _split_table(r: dict, name: str) -> str:
@@ -307,9 +337,11 @@ def _split_table(r: dict, name: str) -> str:
               f"{total[1]:.3f} | |", ""]
     fl = [rep["floors"] for rep in reps if "error" not in rep["floors"]]
     imp_floor = statistics.median(rep["imports_floor"] for rep in reps)
+    exit_cpu = med["exit (MPI finalize)"][1]
     lines += [f"Start-up floor: a process that only does `from mpi4py import MPI; import dolfinx, dolfinx.fem.petsc` "
-              f"{imp_floor:.3f} s wall (the interpreter, MPI and dolfinx; against interpreter + imports "
-              f"{med['interpreter and site'][0] + med['imports'][0]:.3f} s here).", ""]
+              f"(and exits) takes {imp_floor:.3f} s of CPU (median; the interpreter, MPI, dolfinx and the exit), against "
+              f"{med['interpreter and site'][1] + med['imports'][1] + exit_cpu:.3f} s for the run's interpreter, "
+              "imports and exit.", ""]
     if fl:
         f = {k: statistics.median(x[k] for x in fl) for k in fl[0] if isinstance(fl[0][k], float)}
         step = med["steps"][1] / n
@@ -321,6 +353,9 @@ def _split_table(r: dict, name: str) -> str:
                   f"| the damage right-hand side | {1e3 * f['damage_rhs']:.2f} |",
                   f"| the displacement right-hand side (loads, memory term) | {1e3 * f['displacement_rhs']:.2f} |",
                   f"| **a step's floor** (their sum) | **{1e3 * f['step_floor']:.2f}** |",
+                  f"| the four one after the other, as a step does them (medians of 20 rounds): "
+                  f"{', '.join(f'{1e3 * f[k]:.2f}' for k in SEQUENCE)}; "
+                  f"sum | {1e3 * f['step_in_sequence']:.2f} |",
                   f"| a step of the run (CPU of the steps, output not counted, / {n}) | {1e3 * step:.2f} |",
                   f"| a level's output (CPU / {n + 1} levels) | {1e3 * med['outputs (every level)'][1] / (n + 1):.2f} |",
                   f"| level 0's floor: one Cholesky factorization of J (nd ordering) | {1e3 * f['factor_J']:.1f} |",
