@@ -98,14 +98,15 @@ def compare(args: argparse.Namespace) -> int:
         envs = {name: _env(tmp / f"pycache-{name}" if args.bytecode else None) for name in trees}
         if args.bytecode:
             for name, tree in trees.items():
-                _whole(tree, tmp / f"warm-{name}", args.sets, envs[name])
+                _whole(tree, tmp / f"warm-{name}", args.sets + (args.this_sets if name == "this" else []), envs[name])
         for i in range(args.rounds):
             for name, tree in trees.items():
-                runs[name].append(_whole(tree, tmp / f"{name}{i}", args.sets, envs[name]))
+                sets = args.sets + (args.this_sets if name == "this" else [])
+                runs[name].append(_whole(tree, tmp / f"{name}{i}", sets, envs[name]))
                 print(name, i, {k: round(v, 3) for k, v in runs[name][-1].items()}, os.getloadavg()[0], flush=True)
         rows_equal = _csv_equal(tmp / "base0" / "timeseries.csv", tmp / "this0" / "timeseries.csv")
     result = {"base": str(trees["base"]), "base_rev": _rev(trees["base"]), "this_rev": _rev(ROOT),
-              "sets": args.sets, "rounds": args.rounds, "bytecode": args.bytecode,
+              "sets": args.sets, "this_sets": args.this_sets, "rounds": args.rounds, "bytecode": args.bytecode,
               "load": " ".join(f"{x:.1f}" for x in os.getloadavg()), "runs": runs, "csv": rows_equal,
               "stats": {name: {key: _stats([r[key] for r in rs]) for key in rs[0]} for name, rs in runs.items()},
               "pairs": {key: _stats([a[key] / max(b[key], 1e-300) for a, b in zip(runs["this"], runs["base"])])
@@ -138,6 +139,7 @@ def _compare_table(r: dict, name: str) -> str:
     s, p = r["stats"], r["pairs"]
     lines = [f"# The whole run of {SCENE} {sets} (one rank): this tree against {r['base_rev']}", "",
              f"`python scripts/run_floor.py compare --base {r['base']} --rounds {r['rounds']}"
+             f"{''.join(f' --this-set {x}' for x in r.get('this_sets', []))}"
              f"{' --bytecode' if r['bytecode'] else ''} --name {name}`: this = {r['this_rev']}, base = "
              f"{r['base_rev']} (run from {r['base']}); {r['rounds']} rounds, alternated (base, this), each a new "
              f"process; Python's bytecode cache: {'used, one per tree' if r['bytecode'] else 'off (compiled at every run)'}; "
@@ -381,6 +383,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--rounds", type=int, default=5)
     c.add_argument("--bytecode", action="store_true", help="a bytecode cache per tree (as a user has it)")
     c.add_argument("--name", default="run_floor")
+    c.add_argument("--this-set", dest="this_sets", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="overrides for this tree's runs only (e.g. another solver option against the base tree's default)")
     s = sub.add_parser("split", help="one tree's run split into its parts, and its floors")
     s.add_argument("--tree", type=Path, default=ROOT)
     s.add_argument("--repeats", type=int, default=3)
