@@ -199,6 +199,7 @@ class StepController:
         main = getattr(history, "main", history)
         self.c, self.tau = np.asarray(main.weights, dtype=float), np.asarray(main.taus, dtype=float)
         self.g0 = float(np.sum(self.c))
+        self._gk = (math.nan, math.nan)  # (k, g(k)) of the last estimate
         self.source = history.H
         self.source.remember()  # H_n formed here is the one the next step's commit reads
         self.past_H = [np.zeros_like(history.M.x.array) for _ in range(self.p)]
@@ -278,7 +279,9 @@ class StepController:
         sums[:] = 0.0
         if self.past_H:
             g0 = self.g0
-            gk = float(np.sum(self.c * np.exp(-k / self.tau))) if self.p == 1 else g0
+            if self.p == 1 and self._gk[0] != k:  # g(k), for the step's k (most steps repeat the last k)
+                self._gk = (k, float(np.sum(self.c * np.exp(-k / self.tau))))
+            gk = self._gk[1] if self.p == 1 else g0
             dm = self._dm
             np.multiply(self._H, now * g0, out=dm)
             dm -= (old * gk) * self.past_H[0]
