@@ -10,13 +10,20 @@ loaded machine they move far less than wall-clock ones. Median over the rounds, 
 
     python scripts/adaptive_step_cost.py [--scene hard] [--tolerance 3e-2] [--uniform 700] [--rounds 3]
         [--out benchmarks/results/adaptive_step_cost.md]
+    python scripts/adaptive_step_cost.py --trees OLD_TREE . [...]   # two source trees side by side
+
+``--trees``: this script (copied into each tree's scripts/) run by each tree in turn, one round each, alternated,
+``--rounds`` times; the table gives each tree's adaptive/uniform time-loop ratio and its parts per level.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -124,8 +131,12 @@ def main() -> None:
     p.add_argument("--set", action="append", default=[], help="KEY=VALUE, an override for the adaptive run")
     p.add_argument("--clock", default="cpu", choices=["cpu", "wall"])
     p.add_argument("--out", default=str(ROOT / "benchmarks/results/adaptive_step_cost.md"))
+    p.add_argument("--json", default="", help="write the runs' figures here instead of the table")
+    p.add_argument("--trees", nargs=2, default=None, metavar=("A", "B"), help="two source trees, side by side")
     args = p.parse_args()
     CLOCK[0] = time.process_time if args.clock == "cpu" else time.perf_counter
+    if args.trees:
+        return trees(args)
     # the snapshot's methods are wrapped once, at the class (one Snapshot per run)
     snap_t = Timers()
     snap_t.wrap(adaptive.Snapshot, "take", "snapshot take")
@@ -140,6 +151,10 @@ def main() -> None:
             run["timers"].update(snap_t.t)
             runs[c].append(run)
             print(c, f"{run['loop']:.2f} s", run["counts"], flush=True)
+
+    if args.json:
+        Path(args.json).write_text(json.dumps({c: [{k: v for k, v in r.items()} for r in rs] for c, rs in runs.items()}))
+        return
 
     def med(c: str, f) -> str:
         vals = [f(r) for r in runs[c]]
@@ -175,6 +190,47 @@ def main() -> None:
     lines.append(f"| Newton iterations per accepted level | {a0['counts']['newton'] / a0['counts']['levels']:.2f} | "
                  f"{u0['counts']['newton'] / u0['counts']['levels']:.2f} |")
     lines.append(f"| changes of k | {a0['changes']} | {u0['changes']} |")
+    text = "\n".join(lines) + "\n"
+    Path(args.out).write_text(text)
+    print(text)
+
+
+def trees(args: argparse.Namespace) -> None:
+    """Each tree's copy of this script, one round each, alternated; per tree the adaptive/uniform loop ratio and the
+    adaptive run's overhead per level (estimate, snapshot) over the uniform run's time per level."""
+    got: dict[str, list[dict]] = {t: [] for t in args.trees}
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(args.rounds):
+            for t in args.trees:
+                out = Path(tmp) / "run.json"
+                cmd = [sys.executable, str(Path(t) / "scripts" / "adaptive_step_cost.py"), "--scene", args.scene,
+                       "--tolerance", str(args.tolerance), "--uniform", str(args.uniform), "--rounds", "1",
+                       "--clock", args.clock, "--json", str(out), *[x for s in args.set for x in ("--set", s)]]
+                subprocess.run(cmd, check=True, cwd=t, capture_output=True)
+                data = json.loads(out.read_text())
+                a, u = data["adaptive"][0], data["uniform"][0]
+                per_u = u["loop"] / u["counts"]["levels"]
+                got[t].append({"ratio": a["loop"] / u["loop"], "per_level": (a["loop"] / a["counts"]["levels"]) / per_u,
+                               "estimate": a["timers"].get("estimate", 0.0) / a["counts"]["levels"] / per_u,
+                               "snapshot": a["timers"].get("snapshot take", 0.0) / a["counts"]["levels"] / per_u,
+                               "levels": a["counts"]["levels"], "trials": a["counts"]["trials"]})
+                print(t, got[t][-1], flush=True)
+
+    def med(vals: list[float]) -> str:
+        return f"{statistics.median(vals):.3f} [{min(vals):.3f}, {max(vals):.3f}]"
+
+    lines = [f"# Adaptive against uniform, two trees side by side: {args.scene}, 8 x 8, order 1", "",
+             f"`python scripts/adaptive_step_cost.py --trees {' '.join(args.trees)} --scene {args.scene} "
+             f"--tolerance {args.tolerance:g} --uniform {args.uniform} --rounds {args.rounds} --clock {args.clock}`", "",
+             f"Adaptive at tolerance {args.tolerance:g} against {args.uniform} uniform steps, each tree's run in "
+             f"turn, {args.rounds} rounds; {args.clock} seconds. Median [range]; per level: over the uniform run's "
+             "time per level.", "",
+             "| tree | levels (trials) | adaptive / uniform time loop | time per level | estimate per level | "
+             "snapshot per level |", "|---|---|---|---|---|---|"]
+    for t, rs in got.items():
+        lines.append(f"| {t} | {rs[0]['levels']} ({rs[0]['trials']}) | {med([r['ratio'] for r in rs])} | "
+                     f"{med([r['per_level'] for r in rs])} | {med([r['estimate'] for r in rs])} | "
+                     f"{med([r['snapshot'] for r in rs])} |")
     text = "\n".join(lines) + "\n"
     Path(args.out).write_text(text)
     print(text)
