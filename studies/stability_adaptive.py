@@ -22,7 +22,8 @@ import numpy as np
 
 CHECK = [i / 10 for i in range(1, 11)]  # every run has a level there (the adaptive one lands on them)
 ADAPTIVE_COLUMNS = ["tolerance", "trials", "rejected", "time_error", "uniform_steps", "uniform_time_error",
-                    "steps_ratio", "extrapolated", "adaptive_failure"]
+                    "steps_ratio", "extrapolated", "reference_k", "reference_error", "judged", "adaptive_failure"]
+RESOLVED = 2.0  # an adaptive error below this many times the reference's own error is not judged
 
 
 def _run(cfg_path: Path, sets: list[str]) -> dict:
@@ -102,10 +103,38 @@ def uniform_steps_at(err: float, uniform: list[tuple[float, float]]) -> tuple[fl
     return math.exp(math.log(s0) + w * (math.log(s1) - math.log(s0))), not inside
 
 
+def reference_error(k_ref: float, column: list[tuple[float, float]]) -> float:
+    """The reference's own time error, from the finest uniform run of the column ((k, error) pairs): at order 1 the
+    error measured against the reference is C (k - k_ref) and the reference's own C k_ref."""
+    pts = sorted((k, e) for k, e in column if k > k_ref and isinstance(e, (int, float)) and math.isfinite(e))
+    if not pts:
+        return math.nan
+    k, e = pts[0]
+    return e * k_ref / (k - k_ref)
+
+
+def judge(rows: list[dict], k_ref: float | None = None) -> None:
+    """Fill each adaptive row's reference_error (from its column and reference_k, or ``k_ref`` where the row has
+    none), whether it is judged (its error at least RESOLVED times the reference's own) and its failure."""
+    sub = [r for r in rows if r["method"] == "adaptive"]
+    for r in sub:
+        if not isinstance(r.get("reference_k"), (int, float)):
+            r["reference_k"] = k_ref
+        column = [(c["k"], c["uniform_time_error"]) for c in sub
+                  if (c["scene"], c["mu"], c["n"]) == (r["scene"], r["mu"], r["n"])]
+        r["reference_error"] = reference_error(r["reference_k"], column)
+        err = r.get("time_error")
+        r["judged"] = isinstance(err, (int, float)) and err >= RESOLVED * r["reference_error"]
+        r["adaptive_failure"] = failure_of(r)
+
+
 def failure_of(row: dict) -> str:
-    """Why an adaptive cell fails ('' when it does not): stopped, unreliable, more steps for the same error."""
+    """Why an adaptive cell fails ('' when it does not): stopped, unreliable, more steps for the same error; a cell
+    whose error is within RESOLVED times the reference's own (``judged`` false) is not judged on its steps or error."""
     if row["status"] != "converged":
-        return "stopped"
+        return "stopped" if row["status"] != "no_uniform_run" else ""
+    if not row.get("judged", True):
+        return ""
     out = []
     if not row["time_error"] <= row["tolerance"]:
         out.append("error above the tolerance")
@@ -136,7 +165,7 @@ def adaptive_group(args: tuple) -> list[dict]:
         e_uniform, steps = uniform[k]
         tol = e_uniform if math.isfinite(e_uniform) and e_uniform > 0 else math.nan
         row = {"scene": scene, "method": "adaptive", "mu": mu, "n": n, "k": k, "tolerance": tol,
-               "uniform_steps": steps, "uniform_time_error": e_uniform}
+               "uniform_steps": steps, "uniform_time_error": e_uniform, "reference_k": k_ref}
         if not math.isfinite(tol):  # the uniform run stopped: no error to aim at
             row.update({"status": "no_uniform_run", "reason": "the uniform run of this cell stopped",
                         "adaptive_failure": "", "trials": math.nan, "rejected": math.nan, "time_error": math.nan,
@@ -153,8 +182,8 @@ def adaptive_group(args: tuple) -> list[dict]:
                     "seconds": run["seconds"]})
         at, extrapolated = uniform_steps_at(err, pairs) if math.isfinite(err) else (math.nan, False)
         row["steps_ratio"], row["extrapolated"] = trials / at, extrapolated
-        row["adaptive_failure"] = failure_of(row)
         rows.append(row)
+    judge(rows)
     return rows
 
 
@@ -186,8 +215,13 @@ def adaptive_map(rows: list[dict], out: Path) -> Path | None:
             else:
                 text = "X" if r["status"] != "no_uniform_run" else "-"
             bad = bool(r.get("adaptive_failure"))
+            unjudged = r["status"] != "converged" or not r.get("judged", True)
+            if unjudged:
+                grid[a, b] = np.nan
+                text += "\n?" if r["status"] == "converged" else ""
             ax.text(b, a, text + ("\nFAIL" if bad else ""), ha="center", va="center", fontsize=6,
-                    color="darkred" if bad else "black", fontweight="bold" if bad else "normal")
+                    color="darkred" if bad else "white" if unjudged else "black",
+                    fontweight="bold" if bad else "normal")
         ax.set_facecolor("#444444")
         im = ax.imshow(grid, cmap="coolwarm", norm=LogNorm(vmin=0.25, vmax=4.0), aspect="auto")
         ax.set_xticks(range(len(mus)), [f"{math.log10(m):.0f}" for m in mus], fontsize=7)
@@ -201,11 +235,20 @@ def adaptive_map(rows: list[dict], out: Path) -> Path | None:
     bar.minorticks_off()
     fig.suptitle("Adaptive steps starting at k, tolerance = the uniform run's time error: steps ratio (blue < 1 < red)\n"
                  "~: extrapolated beyond the uniform runs' errors; FAIL: more steps for the same error, or error > "
-                 "tolerance; X: stopped; grey: no ratio", fontsize=8)
+                 "tolerance; X: stopped; grey with ?: error within 2x the reference's own, not judged", fontsize=8)
     path = out / "stability_adaptive.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def verdict(r: dict) -> str:
+    """A cell's failure column: its failure, 'not judged' (within RESOLVED times the reference's error) or 'none'."""
+    if r.get("adaptive_failure"):
+        return r["adaptive_failure"]
+    if r["status"] != "converged":
+        return r["status"]
+    return "none" if r.get("judged", True) else f"not judged (reference's own error ~{r['reference_error']:.2g})"
 
 
 def adaptive_table(rows: list[dict], out: Path, command: str) -> Path | None:
@@ -224,15 +267,43 @@ def adaptive_table(rows: list[dict], out: Path, command: str) -> Path | None:
              "a finer step on the same mesh). Steps ratio: the adaptive run's trials (accepted + rejected) over the "
              "uniform steps that reach its error (log-log along the column of k; '~': beyond the column's errors, "
              "along the line of its two nearest runs). Failure: stopped, error above the tolerance, or more steps "
-             "than uniform for the same error.",
-             "", f"{len(sub)} cells, {sum(r['status'] == 'converged' for r in sub)} reached T, {len(failed)} failures.",
+             "than uniform for the same error. Not judged: an adaptive error below 2 x the reference's own error (from the "
+             "column's finest uniform run at order 1: e_min k_ref / (k_min - k_ref)), where the reference cannot tell "
+             "the two runs apart.",
+             "", f"{len(sub)} cells, {sum(r['status'] == 'converged' for r in sub)} reached T, {len(failed)} failures, "
+             f"{sum(not r.get('judged', True) for r in sub)} not judged.",
              "", "| scene | n | mu | k | tolerance | adaptive error | trials (rejected) | uniform steps | steps ratio | "
              "failure |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(sub, key=lambda r: (r["scene"], r["n"], -r["mu"], -r["k"])):
         lines.append(f"| {r['scene']} | {r['n']} | {r['mu']:g} | {r['k']:g} | {num(r['tolerance'], '.3g')} | "
                      f"{num(r['time_error'], '.3g')} | {num(r['trials'], '.0f')} ({num(r['rejected'], '.0f')}) | "
                      f"{num(r['uniform_steps'], '.0f')} | {'~' if r.get('extrapolated') else ''}{num(r['steps_ratio'], '.2f')} | "
-                     f"{r.get('adaptive_failure') or ('none' if r['status'] == 'converged' else r['status'])} |")
+                     f"{verdict(r)} |")
     path = out / "stability_adaptive.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Judge the adaptive rows of a stability.csv again and redraw stability_adaptive.{md,png} (no runs)."""
+    import argparse
+
+    from studies import REPO
+    from studies.study import _read_rows, _write_csv
+
+    p = argparse.ArgumentParser(prog="python -m studies.stability_adaptive", description=main.__doc__)
+    p.add_argument("--output", default=str(REPO / "benchmarks" / "results"))
+    p.add_argument("--reference-k", type=float, default=None, help="for rows written without their reference_k")
+    p.add_argument("--command", default="", help="the study command the rows came from (the table's header)")
+    args = p.parse_args(argv)
+    out = Path(args.output)
+    rows = _read_rows(out / "stability.csv")
+    judge(rows, args.reference_k)
+    _write_csv(rows, out / "stability.csv")
+    for path in (adaptive_map(rows, out), adaptive_table(rows, out, args.command)):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -43,3 +43,16 @@ def test_a_small_column_runs_and_its_adaptive_runs_meet_their_tolerance():
         assert r["status"] == "converged" and r["uniform_steps"] == round(1 / r["k"])
         assert 0 < r["time_error"] <= r["tolerance"] == r["uniform_time_error"]
         assert r["trials"] >= r["levels"] > 0 and math.isfinite(r["steps_ratio"])
+
+
+def test_a_cell_within_the_references_own_error_is_not_judged():
+    """At order 1 the error measured against a reference of step k_ref is C (k - k_ref): the reference's own is
+    C k_ref, and an adaptive error below twice that is not judged (no failure claimed either way)."""
+    from studies.stability_adaptive import judge, reference_error
+
+    assert reference_error(0.01, [(0.1, 0.9), (0.05, 0.4)]) == pytest.approx(0.4 * 0.01 / 0.04)  # C = 10: 0.1
+    cells = [dict(_row(), scene="s", mu=1.0, n=8, method="adaptive", k=k, uniform_time_error=e, time_error=a, tolerance=e,
+                  steps_ratio=3.0) for k, e, a in ((0.1, 0.9, 0.5), (0.05, 0.4, 0.15))]
+    judge(cells, 0.01)
+    assert [c["judged"] for c in cells] == [True, False]  # 0.5 >= 2 x 0.1; 0.15 < 0.2
+    assert cells[0]["adaptive_failure"] == "more steps than uniform" and cells[1]["adaptive_failure"] == ""
