@@ -40,6 +40,7 @@ from solver.run.stepper import Stepper, levels  # noqa: E402
 
 SCENES = {"example1": "example1.toml", "hard": "hard.toml", "load_cycle": "load_cycle.toml"}
 CLOCK = [time.process_time]
+MESH = [8]  # cells across (--n)
 MARKS = "output.times=[" + ", ".join(f"{i / 10:g}" for i in range(1, 10)) + "]"  # as the work-precision study
 
 
@@ -65,7 +66,7 @@ class Timers:
 
 
 def one_run(scene: str, sets: list[str]) -> dict:
-    cfg = load(ROOT / "configs" / SCENES[scene], ["mesh.nx=8", "mesh.ny=8", *sets])
+    cfg = load(ROOT / "configs" / SCENES[scene], [f"mesh.nx={MESH[0]}", f"mesh.ny={MESH[0]}", *sets])
     model = build_model(cfg, MPI.COMM_WORLD)
     timers = Timers()
     clock = adaptive.StepController(model) if cfg.time.adaptive else None
@@ -130,11 +131,13 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--set", action="append", default=[], help="KEY=VALUE, an override for the adaptive run")
     p.add_argument("--clock", default="cpu", choices=["cpu", "wall"])
+    p.add_argument("--n", type=int, default=8, help="cells across the mesh")
     p.add_argument("--out", default=str(ROOT / "benchmarks/results/adaptive_step_cost.md"))
     p.add_argument("--json", default="", help="write the runs' figures here instead of the table")
     p.add_argument("--trees", nargs=2, default=None, metavar=("A", "B"), help="two source trees, side by side")
     args = p.parse_args()
     CLOCK[0] = time.process_time if args.clock == "cpu" else time.perf_counter
+    MESH[0] = args.n
     if args.trees:
         return trees(args)
     # the snapshot's methods are wrapped once, at the class (one Snapshot per run)
@@ -164,9 +167,10 @@ def main() -> None:
         return f"| {label} | {med('adaptive', f)} | {med('uniform', f)} |"
 
     a0, u0 = runs["adaptive"][0], runs["uniform"][0]
-    lines = [f"# Where an adaptive run's time goes: {args.scene}, 8 x 8, order 1", "",
+    lines = [f"# Where an adaptive run's time goes: {args.scene}, {args.n} x {args.n}, order 1", "",
              f"`python scripts/adaptive_step_cost.py --scene {args.scene} --tolerance {args.tolerance:g} "
-             f"--uniform {args.uniform} --rounds {args.rounds} --clock {args.clock}{''.join(' --set ' + s for s in args.set)}`", "",
+             f"--uniform {args.uniform} --rounds {args.rounds} --clock {args.clock} --n {args.n}"
+             f"{''.join(' --set ' + s for s in args.set)}`", "",
              f"Adaptive at tolerance {args.tolerance:g} ({a0['counts']['levels']} levels, "
              f"{a0['counts']['trials'] - a0['counts']['levels']} rejected trials, {a0['changes']} changes of k) "
              f"against {args.uniform} uniform steps. {args.clock.upper()} seconds, "
@@ -205,7 +209,7 @@ def trees(args: argparse.Namespace) -> None:
                 out = Path(tmp) / "run.json"
                 cmd = [sys.executable, str(Path(t) / "scripts" / "adaptive_step_cost.py"), "--scene", args.scene,
                        "--tolerance", str(args.tolerance), "--uniform", str(args.uniform), "--rounds", "1",
-                       "--clock", args.clock, "--json", str(out), *[x for s in args.set for x in ("--set", s)]]
+                       "--clock", args.clock, "--n", str(args.n), "--json", str(out), *[x for s in args.set for x in ("--set", s)]]
                 subprocess.run(cmd, check=True, cwd=t, capture_output=True)
                 data = json.loads(out.read_text())
                 a, u = data["adaptive"][0], data["uniform"][0]
@@ -219,9 +223,10 @@ def trees(args: argparse.Namespace) -> None:
     def med(vals: list[float]) -> str:
         return f"{statistics.median(vals):.3f} [{min(vals):.3f}, {max(vals):.3f}]"
 
-    lines = [f"# Adaptive against uniform, two trees side by side: {args.scene}, 8 x 8, order 1", "",
+    lines = [f"# Adaptive against uniform, two trees side by side: {args.scene}, {args.n} x {args.n}, order 1", "",
              f"`python scripts/adaptive_step_cost.py --trees {' '.join(args.trees)} --scene {args.scene} "
-             f"--tolerance {args.tolerance:g} --uniform {args.uniform} --rounds {args.rounds} --clock {args.clock}`", "",
+             f"--tolerance {args.tolerance:g} --uniform {args.uniform} --rounds {args.rounds} --clock {args.clock} "
+             f"--n {args.n}`", "",
              f"Adaptive at tolerance {args.tolerance:g} against {args.uniform} uniform steps, each tree's run in "
              f"turn, {args.rounds} rounds; {args.clock} seconds. Median [range]; per level: over the uniform run's "
              "time per level.", "",
