@@ -7,6 +7,8 @@ import pytest
 
 from studies.stability_adaptive import adaptive_group, failure_of, uniform_steps_at
 
+pytestmark = pytest.mark.serial  # the study runs in one process: on 2 ranks each would run the same checks again
+
 UNIFORM = [(4e-3, 10), (2e-3, 20), (1e-3, 40)]  # order 1: error x steps = 0.04
 
 
