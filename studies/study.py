@@ -36,6 +36,7 @@ import numpy as np
 from solver.errors import SolveFailure
 from solver.post.charts import pyplot
 from studies import REPO as ROOT  # noqa: E402
+from studies.stability_adaptive import ADAPTIVE_COLUMNS, adaptive_group, adaptive_map, adaptive_table
 from studies.table1_variants import VARIANTS as T1_VARIANTS
 
 SCENES = {"example1": ROOT / "configs" / "example1.toml", "hard": ROOT / "configs" / "hard.toml"}
@@ -51,10 +52,13 @@ VARIANTS = {
     "fixed_point": ["solver.method='fixed_point'"],
     "newton+semi_implicit_damage": ["solver.method='newton'", "solver.damage_scheme='semi_implicit'"],
     "newton+trapezoid_memory": ["solver.method='newton'", "memory.rule='trapezoid'"],
+    # steps chosen by the controller (time.adaptive), each cell's run aiming at its uniform run's time error
+    "adaptive": ["solver.method='newton'", "time.adaptive=true"],
 }
 COLUMNS = ["scene", "method", "mu", "n", "k", "status", "reason", "failed_step", "iterations_per_step",
            "max_iterations", "linear_solves_per_step", "factorizations", "max_penetration", "zeta_left_range",
-           "zeta_raw_min", "zeta_raw_max", "error", "error_u", "error_zeta", "error_T", "levels", "seconds"]
+           "zeta_raw_min", "zeta_raw_max", "error", "error_u", "error_zeta", "error_T", "levels", "seconds",
+           *ADAPTIVE_COLUMNS]
 
 
 def _status(failure: SolveFailure | None) -> tuple[str, str]:
@@ -120,7 +124,7 @@ def heatmaps(rows: list[dict], out: Path, prefix: str = "stability") -> list[Pat
     made = []
     marks = {"diverged": "D", "stagnated": "S", "too_many_iterations": "M", "damage_failed": "F", "non_finite": "N",
              "failed": "X"}
-    for label in dict.fromkeys(r["method"] for r in rows):
+    for label in dict.fromkeys(r["method"] for r in rows if r["method"] != "adaptive"):  # adaptive: its own map
         sub = [r for r in rows if r["method"] == label]
         scenes = list(dict.fromkeys(r["scene"] for r in sub))
         ns = sorted({r["n"] for r in sub})
@@ -167,18 +171,27 @@ def stability(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     groups = []
     for scene in args.scenes:
-        for mu in args.mus:
-            groups.append((scene, mu, [m for m in args.methods if "+" not in m], args.ns, args.ks, args.ref_n,
-                           args.ref_k, args.cache, args.max_it))
+        methods = [m for m in args.methods if "+" not in m and m != "adaptive"]
+        for mu in args.mus if methods else []:
+            groups.append((scene, mu, methods, args.ns, args.ks, args.ref_n, args.ref_k, args.cache, args.max_it))
         # the damage variant's stability depends on k and the damage, not on mu: swept at the paper's mu
         variants = [m for m in args.methods if "+" in m]
         if variants:
             groups.append((scene, 1e-10, variants, args.ns, args.ks, args.ref_n, args.ref_k, args.cache, args.max_it))
-    rows = _run_groups(_stability_group, groups, args.jobs)
+    rows = _run_groups(_stability_group, groups, args.jobs) if groups else []
+    if "adaptive" in args.methods:  # per (scene, mu, n): a reference on that mesh, the uniform column, the cells
+        k_ref = args.adaptive_ref_k or min(args.ks) / 4
+        cells = [(SCENES[scene], scene, mu, n, args.ks, k_ref, args.max_it) for scene in args.scenes
+                 for mu in args.mus for n in args.ns]
+        rows += _run_groups(adaptive_group, cells, args.jobs)
     rows = _kept_rows(out / "stability.csv", rows)
     _write_csv(rows, out / "stability.csv")
     for path in heatmaps(rows, out):
         print(path)
+    command = "python -m studies study stability " + " ".join(getattr(args, "argv", None) or sys.argv[3:])
+    for path in (adaptive_map(rows, out), adaptive_table(rows, out, command.strip())):
+        if path is not None:
+            print(path)
     counts: dict[str, dict[str, int]] = {}
     for r in rows:
         counts.setdefault(r["method"], {}).setdefault(r["status"], 0)
@@ -446,6 +459,8 @@ def main(argv: list[str] | None = None) -> int:
                     default=["newton", "newton_energy", "newton_condensed", "penalty_duality", "fixed_point",
                              "newton+semi_implicit_damage"])
     st.add_argument("--max-it", type=int, default=200, help="iteration limit per step, for every method")
+    st.add_argument("--adaptive-ref-k", type=float, default=None,
+                    help="the step of the same-mesh reference of the adaptive cells (default: the smallest k / 4)")
     wp.add_argument("--ks", type=float, nargs="+", default=[0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001])
     wp.add_argument("--ns", type=int, nargs="+", default=[8, 16, 32, 64])
     wp.add_argument("--methods", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))

@@ -23,9 +23,15 @@ from solver.physics.quadrature import QuadratureRule
 
 
 def _equal(a: np.ndarray, b: np.ndarray) -> bool:
-    """a == b entry by entry (exact); a sample of about 64 entries first settles most unequal pairs at once."""
-    stride = max(1, a.size // 64)
-    return a.shape == b.shape and np.array_equal(a[::stride], b[::stride]) and np.array_equal(a, b)
+    """a == b entry by entry (exact; NaN equals nothing); for a long array a sample of about 64 entries first
+    settles most unequal pairs at once (a short one is compared whole: one pass costs less than two calls)."""
+    if a.shape != b.shape:
+        return False
+    if a.size > 4096:
+        stride = a.size // 64
+        if not (a[::stride] == b[::stride]).all():
+            return False
+    return bool((a == b).all())
 
 
 class StrainMap:
@@ -177,6 +183,7 @@ class MemorySource:
         self.Q = rule.space((d, d))
         self.u, self.zeta, self.integrand, self.d = u, zeta, integrand, d
         self.keep = keep
+        self._kept: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # remember(): Phi, H, scratch
         self._cache: list[tuple[np.ndarray, np.ndarray]] = []  # (u values, their strain), the newest first
         cells = rule.cells
         npts = rule.points.shape[0]
@@ -223,6 +230,49 @@ class MemorySource:
         """Drop the kept strains (the next call computes its product: what one evaluation costs)."""
         self._cache.clear()
 
+    def remember(self) -> None:
+        """From now on keep the last Phi_L(A eps(u)) (H at zeta = 1) and H at scale 1, with copies of the u and zeta
+        values they belong to, and let a call for the same values reuse them: an adaptive run's estimate forms H_n,
+        and the next step's commit reads the same H_n (:meth:`unit`: the estimate's damage term reads Phi). Every
+        call then forms base + scale H from H at scale 1, found or computed, so that the numbers do not depend on
+        whether it was found (a restart's first commit computes it); H = zeta Phi is the product the law makes."""
+        if self._kept is None:
+            n = self.size_q * self.d * self.d
+            self._kept = (np.empty(n), np.empty(n), np.empty(n))  # Phi, H at scale 1, scratch for scale H
+            self._kept_u: np.ndarray | None = None
+            self._kept_z: np.ndarray | float | None = None
+
+    def unit(self) -> np.ndarray:
+        """Phi_L(A eps(u)) at the points for the current u, in the quadrature space's layout (:meth:`remember`d
+        sources only; a kept array: read it, never change it)."""
+        u = self.u.x.array
+        phi = self._kept[0]
+        if self._kept_u is None or not _equal(self._kept_u, u):
+            self._source(self.strain(), phi, 1.0, None, zeta=1.0)
+            if self._kept_u is not None and self._kept_u.shape == u.shape:
+                np.copyto(self._kept_u, u)
+            else:
+                self._kept_u = u.copy()
+            self._kept_z = None
+        return phi
+
+    def _kept_h(self) -> np.ndarray:
+        """H at scale 1 for the current u and zeta: the kept one, or zeta Phi (Phi found or computed) and kept."""
+        phi = self.unit()
+        z = self.zeta.x.array if isinstance(self.zeta, fem.Function) else float(self.zeta.value)
+        held = self._kept_z
+        if held is not None and (_equal(held, z) if isinstance(z, np.ndarray) else held == z):
+            return self._kept[1]
+        zq = self.zeta_at_points()
+        d2 = self.d * self.d
+        np.multiply(phi.reshape(-1, d2), zq[:, None] if isinstance(zq, np.ndarray) else zq,
+                    out=self._kept[1].reshape(-1, d2))
+        if isinstance(z, np.ndarray) and isinstance(held, np.ndarray) and held.shape == z.shape:
+            np.copyto(held, z)
+        else:
+            self._kept_z = z.copy() if isinstance(z, np.ndarray) else z
+        return self._kept[1]
+
     def strain(self, u: np.ndarray | None = None) -> np.ndarray:
         """The independent components of eps(u) at the points, (component, point); u: the field's values by default.
 
@@ -243,7 +293,14 @@ class MemorySource:
     def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:
         """out = base + scale * H at the points for the current u and zeta (base None: scale * H), in the
         quadrature space's layout (base may be out)."""
-        return self._source(self.strain(), out, scale, base)
+        if self._kept is None:
+            return self._source(self.strain(), out, scale, base)
+        h = self._kept_h()
+        if out is None:
+            out = np.empty_like(h)
+        if base is None:
+            return np.multiply(h, scale, out=out)
+        return np.add(base, np.multiply(h, scale, out=self._kept[2]), out=out)
 
     def extrapolated(self, u_prev: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0,
                      base: np.ndarray | None = None, ratio: float = 1.0) -> np.ndarray:
@@ -260,13 +317,17 @@ class MemorySource:
             eps -= ratio * self.strain(u_prev)
         return self._source(eps, out, scale, base)
 
-    def zeta_at_points(self) -> np.ndarray | float:
+    def zeta_at_points(self, values: np.ndarray | None = None) -> np.ndarray | float:
         """zeta at the points (a constant zeta: its value): for a Lagrange zeta the basis at the points, tabulated
         once on one cell, applied to each cell's dofs in blocks of cells (nothing stored per point; the sums in
-        another order than a sparse matrix's: round-off)."""
+        another order than a sparse matrix's: round-off). ``values``: another array of zeta's space (ghosts
+        included), e.g. an error of zeta, instead of zeta's own."""
         if self._zeta_basis is None:
-            return self.Zq @ self.zeta.x.array if self.Zq is not None else float(self.zeta.value)
-        z, rows, dofs, basis = self.zeta.x.array, self._zeta_rows, self._zeta_dofs, self._zeta_basis
+            if self.Zq is not None:
+                return self.Zq @ (self.zeta.x.array if values is None else values)
+            return float(self.zeta.value)
+        z = self.zeta.x.array if values is None else values
+        rows, dofs, basis = self._zeta_rows, self._zeta_dofs, self._zeta_basis
         out = np.zeros(self.size_q)
         for start in range(0, len(dofs), StrainMap.BLOCK):
             b = slice(start, start + StrainMap.BLOCK)
@@ -274,11 +335,12 @@ class MemorySource:
         return out
 
     def _source(self, eps: np.ndarray, out: np.ndarray | None, scale: float = 1.0,
-                base: np.ndarray | None = None) -> np.ndarray:
+                base: np.ndarray | None = None, zeta: np.ndarray | float | None = None) -> np.ndarray:
         """base + scale zeta Phi_L(A eps) from the compact strain, written out as the full d*d tensor, in blocks of
-        POINTS points (the law acts point by point: the same values as on the whole array)."""
+        POINTS points (the law acts point by point: the same values as on the whole array); ``zeta`` at the points
+        (by default the field's)."""
         d = self.d
-        zeta = self.zeta_at_points()
+        zeta = self.zeta_at_points() if zeta is None else zeta
         if out is None:
             out = np.empty(self.size_q * d * d)
         full = out.reshape(-1, d * d)

@@ -35,9 +35,8 @@ from petsc4py import PETSc
 
 from solver.config import Config
 from solver.errors import SolveFailure
-from solver.laws.memory import MemoryIntegrand
 from solver.physics.material import lame, strain
-from solver.physics.memory_source import MemorySource, point_weights
+from solver.physics.memory_source import point_weights
 
 SAFETY = 0.9  # the next step aims at SAFETY times the tolerance
 GROW, SHRINK = 2.0, 0.2  # the most a step grows or shrinks to the next one
@@ -158,6 +157,7 @@ class StepController:
         self.mu = math.inf  # the smallest quantum taken so far
         self.have = 0  # past values of the state held for the estimate (since the start, or a kink at order 2)
         self.past_t = np.zeros(self.p)
+        self._sums = np.zeros(4)
         self._memory_parts(model)
         self._damage_parts(model)
         self.gamma_c = self._contact_measure(model)
@@ -198,7 +198,10 @@ class StepController:
             return
         main = getattr(history, "main", history)
         self.c, self.tau = np.asarray(main.weights, dtype=float), np.asarray(main.taus, dtype=float)
+        self.g0 = float(np.sum(self.c))
+        self._gk = (math.nan, math.nan)  # (k, g(k)) of the last estimate
         self.source = history.H
+        self.source.remember()  # H_n formed here is the one the next step's commit reads
         self.past_H = [np.zeros_like(history.M.x.array) for _ in range(self.p)]
         self._H = np.zeros_like(history.M.x.array)
         self._dm = np.zeros_like(history.M.x.array)  # the step's error of M (scratch)
@@ -209,7 +212,6 @@ class StepController:
         self.E_M = np.zeros_like(history.M.x.array)  # the accumulated error of M
         if model.damage is not None:  # E_zeta Phi_L(A eps(u)): the accumulated damage error's rate into M
             self._Ez = fem.Function(model.damage.V)
-            self._EzPhi = MemorySource(history.rule, model.u, self._Ez, MemoryIntegrand(cfg.memory.L, lam, mu))
 
     def _damage_parts(self, model) -> None:
         """phi at the nodes (lumped: (phi, xi) / (1, xi)), the nodes' masses."""
@@ -231,11 +233,10 @@ class StepController:
         self.E_z = np.zeros_like(damage.zeta.x.array)  # the accumulated error of zeta
         self.zeta_star = model.cfg.damage.zeta_star if model.cfg.damage.clip else -math.inf
 
-    def _norm_m(self, dm: np.ndarray) -> float:
-        """||dM|| in L2 over the memory rule's points (dM a memory-space array)."""
+    def _square_m(self, dm: np.ndarray) -> float:
+        """This rank's part of ||dM||^2 in L2 over the memory rule's points (dM a memory-space array)."""
         sq = dm.reshape(-1, self._dd)
-        local = float(np.dot(self._w, np.einsum("ij,ij->i", sq, sq)))
-        return math.sqrt(max(self.comm.allreduce(local, op=MPI.SUM), 0.0))
+        return float(np.dot(self._w, np.einsum("ij,ij->i", sq, sq)))
 
     @staticmethod
     def _contact_measure(model) -> float:
@@ -274,10 +275,13 @@ class StepController:
         else:  # the miss of the linear extrapolation through the two past levels
             r = k / (self.past_t[0] - self.past_t[1])
             now, old, extra = 1.0, 1.0 + r, -r
-        err_u = err_u0 = 0.0
+        sums = self._sums  # ||E_M||^2, ||E_M + dM||^2, ||E_z||^2, ||E_z + dz||^2 on this rank: one allreduce
+        sums[:] = 0.0
         if self.past_H:
-            g0 = float(np.sum(self.c))
-            gk = float(np.sum(self.c * np.exp(-k / self.tau))) if self.p == 1 else g0
+            g0 = self.g0
+            if self.p == 1 and self._gk[0] != k:  # g(k), for the step's k (most steps repeat the last k)
+                self._gk = (k, float(np.sum(self.c * np.exp(-k / self.tau))))
+            gk = self._gk[1] if self.p == 1 else g0
             dm = self._dm
             np.multiply(self._H, now * g0, out=dm)
             dm -= (old * gk) * self.past_H[0]
@@ -286,10 +290,9 @@ class StepController:
                 dm -= (extra * g0) * self.past_H[1]
                 dm *= 0.5 * k * (1.0 + k / (3.0 * (k + kp)))  # the extrapolated term's miss and the trapezoid's
             np.copyto(self._lm, dm)
-            err_u0 = self._norm_m(self.E_M) / self.alpha
+            sums[0] = self._square_m(self.E_M)
             dm += self.E_M
-            err_u = self._norm_m(dm) / self.alpha
-        err_z = err_z0 = 0.0
+            sums[1] = self._square_m(dm)
         if self.past_phi:
             zeta = self.model.damage.zeta.x.array[: self.nz]
             phi = self._phi.x.array[: self.nz]
@@ -302,11 +305,13 @@ class StepController:
             dz[held] = 0.0
             self._lz, self._held = dz, held
             Ez = np.where(held, 0.0, self.E_z[: self.nz])
-            err_z0 = math.sqrt(max(self.comm.allreduce(float(np.dot(self.mass, Ez * Ez)), op=MPI.SUM), 0.0))
+            sums[2] = float(np.dot(self.mass, Ez * Ez))
             Ez += dz
-            err_z = math.sqrt(max(self.comm.allreduce(float(np.dot(self.mass, Ez * Ez)), op=MPI.SUM), 0.0))
+            sums[3] = float(np.dot(self.mass, Ez * Ez))
+        total = np.sqrt(np.maximum(self.comm.allreduce(sums, op=MPI.SUM), 0.0))
+        err_u0, err_u, err_z0, err_z = total[0] / self.alpha, total[1] / self.alpha, total[2], total[3]
         # the growth of the accumulated error's norm that this step's local error makes
-        return (err_u + err_z) - (err_u0 + err_z0)
+        return float((err_u + err_z) - (err_u0 + err_z0))
 
     def _accumulate(self, k: float) -> None:
         """The accepted level's local errors join the accumulated ones (fields: errors of one sign add up, of
@@ -320,18 +325,23 @@ class StepController:
             e[:] = self._Ez.x.array
         if self.past_H:
             self.E_M += self._lm
-            if self.past_phi:
-                self._EzPhi(self.E_M, scale=k * float(np.sum(self.c)), base=self.E_M)
+            if self.past_phi:  # E_M += k g0 E_z Phi_L(A eps(u_n)), Phi kept by the source since the estimate
+                d2 = self._dd
+                ez = self.source.zeta_at_points(self._Ez.x.array)
+                phi = self.source.unit().reshape(-1, d2)
+                em = self.E_M.reshape(-1, d2)
+                em += (k * self.g0) * (phi * ez[:, None])
 
     def _push(self, t: float, restart: bool) -> None:
         """Level n's state (the work arrays) becomes the newest past one; ``restart``: the only one."""
         self.past_t[1:] = self.past_t[:-1].copy()
         self.past_t[0] = t
-        for past, now in ((self.past_H, self._H if self.past_H else None),
-                          (self.past_phi, self._phi.x.array if self.past_phi else None)):
-            if past:
-                past.insert(0, past.pop())
-                past[0][:] = now
+        if self.past_H:  # the work array becomes the newest past one, the oldest the next work array (no copy)
+            self.past_H.insert(0, self._H)
+            self._H = self.past_H.pop()
+        if self.past_phi:
+            self.past_phi.insert(0, self.past_phi.pop())
+            self.past_phi[0][:] = self._phi.x.array
         self.have = 1 if restart else min(self.have + 1, self.p)
 
     # ------------------------------------------------------------------ the steps

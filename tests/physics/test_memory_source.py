@@ -65,3 +65,35 @@ def test_the_3d_source_and_force_equal_their_definitions(comm):
     want = fem.petsc.assemble_vector(fem.form(ufl.inner(M, strain(ufl.TestFunction(u.function_space))) * rule.dx))
     want.ghostUpdate(addv=fem.petsc.PETSc.InsertMode.ADD, mode=fem.petsc.PETSc.ScatterMode.REVERSE)
     assert np.allclose(out.array_r, want.array_r, rtol=1e-12, atol=1e-12 * np.abs(want.array_r).max())
+
+
+def test_a_remembered_source_gives_the_same_numbers_and_never_a_stale_one(comm):
+    """remember(): H, base + scale H and Phi (unit()) equal the plain source's to round-off, for the same values
+    and after u or zeta changed (a kept H of old values is never returned); H itself is zeta Phi exactly."""
+    _, u, zeta, rule = _box(comm, 1)
+    integrand = MemoryIntegrand(60.0, *lame(100.0, 0.3, "plane_strain"))
+    plain = MemorySource(rule, u, zeta, integrand)
+    kept = MemorySource(rule, u, zeta, integrand, keep=1)
+    kept.remember()
+    base = np.random.default_rng(2).standard_normal(plain.size_q * 9)
+
+    def agree():
+        ref = plain()
+        scale = np.abs(ref).max()
+        for _ in range(2):  # computed, then found
+            assert np.array_equal(kept(), ref)  # H at scale 1: the law's own product zeta Phi
+            got, want = kept(base=base, scale=0.3), plain(base=base, scale=0.3)
+            assert np.abs(got - want).max() <= 1e-14 * scale
+        unit = kept.unit().reshape(-1, 9) * kept.zeta_at_points()[:, None]
+        assert np.array_equal(unit.ravel(), ref)
+
+    agree()
+    zeta.x.array[:] *= 0.7  # zeta changed, u not
+    agree()
+    u.x.array[:] *= 1.3  # u changed, zeta not
+    agree()
+    ez = np.random.default_rng(3).standard_normal(zeta.x.array.size)  # another array of zeta's space at the points
+    zeta.x.array[:], keep_values = ez, zeta.x.array.copy()
+    at = plain.zeta_at_points()
+    zeta.x.array[:] = keep_values
+    assert np.array_equal(kept.zeta_at_points(ez), at)
