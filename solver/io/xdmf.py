@@ -65,6 +65,7 @@ This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import os
 import queue
@@ -260,8 +261,8 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 
 
 def _write_dataset(chunk: _Chunk, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
-    """One field of one level: ``values[rows]`` (the field in file order) copied into the chunk's image, where its
-    dataset's data lies."""
+    """One field of one level: ``values[rows]`` (the field in file order) written where its dataset's data lies in
+    the chunk's file (through the level's staging buffer when the level is small)."""
     chunk.put(slot, name, values, rows)
 
 
@@ -275,9 +276,9 @@ def _write_file(path: Path, data: bytes) -> None:
 
 
 def _close_chunk(chunk: _Chunk) -> None:
-    """Write a chunk's image, complete, to its path."""
-    _write_file(chunk.path, chunk.image())
-    chunk.recycle()
+    """Complete a chunk's file: a full chunk's is complete once its last level is written; one closed early is
+    written again as the file of its levels only."""
+    chunk.finish()
 
 
 def _remove(path: Path) -> None:
@@ -297,16 +298,31 @@ def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
         raise
 
 
+def _pwrite(fd: int, data, offset: int, path: Path) -> None:
+    """All of ``data`` (bytes or a contiguous array) at ``offset`` of the open file ``fd`` (a failure names the file)."""
+    view = memoryview(data).cast("B")
+    try:
+        while len(view):
+            done = os.pwrite(fd, view, offset)
+            view, offset = view[done:], offset + done
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
 ABOUT = "solver.xdmf chunk: group NNNN holds level FIRST + NNNN of the series (FIRST: the number in the file name)"
+STAGE_BYTES = 4 * 2**20  # a level's part of a chunk file up to this size is assembled in memory and written at once
 
 
 class _Template:
     """The HDF5 file of a chunk of ``slots`` levels, made once: its bytes other than the datasets' data, and where
     each dataset's data lies (contiguous, allocated at creation).
 
-    Every chunk of a series has the same groups and datasets, so a chunk is this file with its levels' values
-    copied in at those offsets (a memcpy per field) instead of an HDF5 group and datasets made per level: the
-    HDF5 calls (some 50 us per dataset) are paid once per series and chunk size, not per level and field."""
+    Every chunk of a series has the same groups and datasets, so a chunk's file is these bytes with its levels'
+    values written at those offsets instead of an HDF5 group and datasets made per level: the HDF5 calls (some
+    50 us per dataset) are paid once per series and chunk size, not per level and field. The file is cut into one
+    segment per slot, ``[cut[s], cut[s + 1])``, holding that slot's data and the HDF5 metadata around it, so that a
+    level is written as its segment: the file grows level by level and is complete with its last level. Only the
+    metadata is kept in memory, not an image of the file."""
 
     def __init__(self, fields: Sequence[FieldSpec], counts: Mapping[str, int], dtype: np.dtype, slots: int) -> None:
         h5 = h5py.File(f"template-{slots}", "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
@@ -332,88 +348,158 @@ class _Template:
             image = h5.id.get_file_image()
         finally:
             h5.close()
-        self.dtype, self.size = dtype, len(image)
-        head, at = [], 0  # the metadata (HDF5's own bytes): what lies between the datasets' values
-        for offset, count in sorted(v for where in self.where for v in where.values() if v[1]):
-            if offset > at:
-                head.append((at, image[at:offset]))
-            at = max(at, offset + count * dtype.itemsize)
-        self.head = head + ([(at, image[at:])] if at < len(image) else [])
-        self.spare: bytearray | None = None
+        self.dtype, self.size, self.slots = dtype, len(image), slots
+        spans = [[(o, o + c * dtype.itemsize) for o, c in where.values() if c] for where in self.where]
+        # the file is cut before slot s where every earlier slot's data ends and every later slot's begins (HDF5 puts
+        # small datasets of several slots in one block: those slots share a part)
+        ends = np.maximum.accumulate([max((b for _, b in sp), default=0) for sp in spans])
+        starts = np.minimum.accumulate([min((a for a, _ in sp), default=self.size) for sp in spans][::-1])[::-1]
+        firsts = [0] + [s for s in range(1, slots) if ends[s - 1] <= starts[s]]
+        self.cut = [0] + [int(starts[s]) for s in firsts[1:]] + [self.size]  # part p: [cut[p], cut[p + 1])
+        self.part_of = np.repeat(np.arange(len(firsts)), np.diff(firsts + [slots])).tolist()  # slot -> its part
+        self.last = [f - 1 for f in firsts[1:]] + [slots - 1]  # part -> its last slot
+        head, at = [], 0  # the metadata (HDF5's own bytes): what lies between the datasets' values, cut at the parts
+        for offset, end in sorted(v for span in spans for v in span) + [(self.size, self.size)]:
+            while offset > at:
+                stop = min(offset, next(c for c in self.cut if c > at))
+                head.append((at, image[at:stop]))
+                at = stop
+            at = max(at, end)
+        self.meta: list[list[tuple[int, bytes]]] = [[] for _ in firsts]  # per part: the metadata in it
+        for offset, part in head:
+            self.meta[min(bisect.bisect_right(self.cut, offset) - 1, len(firsts) - 1)].append((offset, part))
+        self._stage: bytearray | None = None
 
-    def recycle(self, image: bytearray) -> None:
-        """Take back an image once its file is written: the next chunk's, its values all written again (no new
-        memory to allocate and fault in per chunk)."""
-        self.spare = image
+    def stage(self, part: int) -> memoryview | None:
+        """A buffer holding part ``part`` of the file with its metadata in place (its values to be filled), when it is
+        at most ``STAGE_BYTES``; None (a large part: written to the file piece by piece)."""
+        start, end = self.cut[part], self.cut[part + 1]
+        if end - start > STAGE_BYTES:
+            return None
+        if self._stage is None or len(self._stage) < end - start:
+            self._stage = bytearray(end - start)
+        buf = memoryview(self._stage)[: end - start]
+        for offset, data in self.meta[part]:
+            buf[offset - start: offset - start + len(data)] = data
+        return buf
 
-    def image(self) -> bytearray:
-        """An image of the file: its metadata, and zeros (or the values of a written chunk: :meth:`recycle`) where
-        the values go."""
-        if self.spare is not None:
-            out, self.spare = self.spare, None
-            return out
-        out = bytearray(self.size)
-        for offset, part in self.head:
-            out[offset: offset + len(part)] = part
-        return out
-
-    def values(self, image: bytearray, slot: int, name: str) -> np.ndarray:
-        """The values of a field at a slot, a view into ``image``."""
+    def values(self, buf, slot: int, name: str, base: int = 0) -> np.ndarray:
+        """The values of a field at a slot in ``buf``, a copy of the file's bytes from offset ``base`` on (a view)."""
         offset, count = self.where[slot][name]
-        return np.frombuffer(image, dtype=self.dtype, count=count, offset=offset) if count else np.zeros(0, self.dtype)
+        return (np.frombuffer(buf, dtype=self.dtype, count=count, offset=offset - base) if count
+                else np.zeros(0, self.dtype))
 
 
 class _Chunk:
-    """A chunk being filled (rank 0): the image of its HDF5 file in memory, written to ``path`` when closed.
+    """A chunk being filled (rank 0): its HDF5 file, written a level at a time and listed once it is closed.
 
-    Kept in memory, an open chunk never leaves a half-written HDF5 file behind it: a full disk fails the one
-    plain write of its image. It costs up to ``CHUNK_BYTES`` of memory on rank 0. ``template(n)`` gives the
-    :class:`_Template` of n slots: a chunk closed before it is full is written as the file of its levels only.
+    The file is a plain file written at the offsets its :class:`_Template` gives (never opened by HDF5 for writing);
+    until its levels are listed, a kill leaves it unlisted, and a restart or the next run removes it. A level of up
+    to ``STAGE_BYTES`` is assembled in memory and written with one call; a larger one is written field by field, so
+    that the writer holds one field beside the solver's state. ``template(n)`` gives the :class:`_Template` of n
+    slots: a chunk closed before it is full is written again as the file of its levels only (``finish``).
     """
 
     def __init__(self, path: Path, first: int, slots: int, template) -> None:
         self.path, self.first, self.slots, self.template = path, first, slots, template
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
-        self.full_image = template(slots).image()
+        self.fd: int | None = None
+        try:
+            self.fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        self._buf: memoryview | None = None  # the part being assembled in memory (small parts), and its index
+        self._part = -1
 
     @property
     def full(self) -> bool:
         return len(self.grids) >= self.slots
 
     def put(self, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
-        """A field at a slot: ``values[rows]``, taken straight into the image (one copy)."""
-        np.take(values, rows, out=self.template(self.slots).values(self.full_image, slot, name), mode="clip")
+        """A field at a slot: ``values[rows]``, taken straight into its part's buffer (one copy), or into an array
+        written at once (a large part)."""
+        full = self.template(self.slots)
+        if self._buf is not None:
+            np.take(values, rows, out=full.values(self._buf, slot, name, full.cut[full.part_of[slot]]), mode="clip")
+            return
+        offset, count = full.where[slot][name]
+        if count:
+            _pwrite(self.fd, np.take(values, rows), offset, self.path)
 
     def add(self, t: float, values: np.ndarray | list[np.ndarray], rows: Mapping[str, np.ndarray], grid_format: str) -> None:
         """Write one level into group ``NNNN``: each field ``values[rows[field]]`` (``values`` a list: the fields' own
         arrays, in the order of ``rows``); its grid is kept once every field is written."""
         slot = len(self.grids)
+        full = self.template(self.slots)
+        part = full.part_of[slot]
+        if slot == 0 or full.part_of[slot - 1] != part:  # the part's first level
+            self._buf, self._part = full.stage(part), part
+            if self._buf is None:  # a large part: its metadata now, then each field as it comes
+                for offset, data in full.meta[part]:
+                    _pwrite(self.fd, data, offset, self.path)
         for i, (name, index) in enumerate(rows.items()):
             _write_dataset(self, slot, name, values[i] if isinstance(values, list) else values, index)
+        if slot == full.last[part]:
+            self._write_staged()
         self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=f"{slot:04d}"))
         self.times.append(t)
 
-    def image(self) -> bytearray:
-        """The file of the complete levels (all slots: the image filled; fewer: their values in a smaller file)."""
-        n = len(self.grids)
-        if n == self.slots:
-            return self.full_image
-        full, part = self.template(self.slots), self.template(n)
-        out = part.image()
-        for slot in range(n):
-            for name in part.where[slot]:
-                part.values(out, slot, name)[:] = full.values(self.full_image, slot, name)
-        return out
+    def _write_staged(self) -> None:
+        """Write the part being assembled in memory (if any) to the file."""
+        if self._buf is not None:
+            buf, self._buf = self._buf, None
+            _pwrite(self.fd, buf, self.template(self.slots).cut[self._part], self.path)
 
-    def recycle(self) -> None:
-        """Give the image back to the template (the file written)."""
-        self.template(self.slots).recycle(self.full_image)
-        self.drop()
+    def finish(self) -> None:
+        """Complete the file: with all its slots written it is; with fewer, the file of those levels is written beside
+        it (one field at a time, read back from it) and renamed over it."""
+        n = len(self.grids)
+        try:
+            if n < self.slots:
+                self._write_staged_part(n)
+                self._rewrite(n)
+        finally:
+            self.drop()
+
+    def _write_staged_part(self, n: int) -> None:
+        """A part left half assembled (a chunk closed early) written, if it holds complete levels, so that they can be
+        read back."""
+        if self._buf is not None and n and self.template(self.slots).part_of[n - 1] == self._part:
+            self._write_staged()
+        self._buf = None
+
+    def _rewrite(self, n: int) -> None:
+        full, part = self.template(self.slots), self.template(n)
+        tmp = self.path.with_name(self.path.stem + "_part.h5")  # levels_*.h5: removed by a restart if left by a kill
+        fd = None
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            for slot in range(n):
+                for offset, data in part.meta[slot]:
+                    _pwrite(fd, data, offset, tmp)
+                for name, (offset, count) in part.where[slot].items():
+                    if count:
+                        _pwrite(fd, os.pread(self.fd, count * full.dtype.itemsize, full.where[slot][name][0]), offset,
+                                tmp)
+            os.close(fd)
+            fd = None
+            os.replace(tmp, self.path)
+        except BaseException:
+            if fd is not None:
+                os.close(fd)
+            _remove(tmp)
+            raise
 
     def drop(self) -> None:
-        """Forget the image (a failed or killed chunk)."""
-        self.full_image = bytearray()
+        """Close the file as it is (a failed or killed chunk: left unlisted)."""
+        self._buf = None
+        if self.fd is not None:
+            fd, self.fd = self.fd, None
+            try:
+                os.close(fd)
+            except OSError:
+                pass
 
 
 class _Settler:
@@ -683,8 +769,9 @@ class XDMFSeries:
         chunk, self.chunk = self.chunk, None
         if chunk is None:
             return
-        if not chunk.grids:  # its first level failed: nothing to write
+        if not chunk.grids:  # its first level failed: nothing to list
             chunk.drop()
+            _remove(chunk.path)
             return
         try:
             _close_chunk(chunk)
