@@ -27,13 +27,12 @@ keeps each one open (past the usual limit of 1024 descriptors).
 
 **Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
 levels of chunk files that were written completely and will not be written again.
-- *Data.* The chunk being filled is the image of an HDF5 file in memory on rank 0.
-  It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
-  :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
-  :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
-  only after that are its levels listed. A kill before or during that write leaves at most
-  an unlisted file. No HDF5 file is ever open for writing on disk, and a listed file is only
-  ever read.
+- *Data.* The chunk being filled is a plain file on rank 0, written level by level at the offsets its HDF5
+  template gives (see *Cost*); it is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at
+  every :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at :meth:`XDMFSeries.close`
+  (a chunk closed before it is full is written again as the file of its levels only, beside it, and renamed over
+  it), and only after that are its levels listed. A kill before leaves at most an unlisted file. No HDF5 file is
+  ever open for writing on disk, and a listed file is only ever read.
 - *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
   ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
   atomic on POSIX). A reader, or the file left by a kill, sees the old list or the new one.
@@ -47,8 +46,11 @@ they survive the death of the process, not of the machine.
 
 **Cost.** The groups and datasets of a chunk are made by HDF5 once per series and chunk size
 (:class:`_Template`: contiguous datasets allocated at creation, whose data offsets in the file are then known);
-a level copies its values into the chunk's image at those offsets, with no HDF5 call (a dataset made per level
-and field cost some 50 us, most of the writer's time). The XML is rewritten once per closed chunk, so its cost
+a level's values are written into the chunk's file at those offsets, with no HDF5 call (a dataset made per level
+and field cost some 50 us, most of the writer's time). A level's part of the file (its data and the HDF5 metadata
+around it; several levels' where HDF5 put their small datasets in one block) of up to ``STAGE_BYTES`` is assembled
+in memory and written with one call; a larger one is written field by field, so that the writer holds one field of the level beside the solver's state, never a chunk.
+The XML is rewritten once per closed chunk, so its cost
 per level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
 calling thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each
 closed chunk (``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the
@@ -87,7 +89,7 @@ CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 FACET_TYPES = {2: "Polyline", 3: "Triangle"}  # a boundary's facets (contact.xdmf): segments in 2-D, triangles in 3-D
 MAX_LEVELS_PER_CHUNK = 100
-CHUNK_BYTES = 64 * 2**20  # an open chunk is held in memory on rank 0
+CHUNK_BYTES = 64 * 2**20  # the largest chunk file
 SETTLE_CHUNKS = True  # fdatasync each closed chunk and drop its pages, in a thread (see _Settler)
 
 _HEAD = ('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n  <Domain>\n'
