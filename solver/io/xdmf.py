@@ -49,13 +49,12 @@ they survive the death of the process, not of the machine.
 a level's values are written into the chunk's file at those offsets, with no HDF5 call (a dataset made per level
 and field cost some 50 us, most of the writer's time). A level's part of the file (its data and the HDF5 metadata
 around it; several levels' where HDF5 put their small datasets in one block) of up to ``STAGE_BYTES`` is assembled
-in memory and written with one call; a larger one is written field by field, so that the writer holds one field of the level beside the solver's state, never a chunk.
-The XML is rewritten once per closed chunk, so its cost
-per level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
-calling thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each
-closed chunk (``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the
-kernel does not write GBs of dirty pages back late in a long run, where that slows the memory-bound solves
-(``SETTLE_CHUNKS``).
+in memory and written with one call; a larger one is written field by field, so that the writer holds one field of
+the level beside the solver's state, never a chunk. The XML is rewritten once per closed chunk, so its cost per
+level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the calling
+thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each closed chunk
+(``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the kernel does not write
+GBs of dirty pages back late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
 
 **Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
 line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
@@ -370,26 +369,24 @@ class _Template:
         self.meta: list[list[tuple[int, bytes]]] = [[] for _ in firsts]  # per part: the metadata in it
         for offset, part in head:
             self.meta[min(bisect.bisect_right(self.cut, offset) - 1, len(firsts) - 1)].append((offset, part))
-        self._stage: bytearray | None = None
+        sizes = [b - a for a, b in zip(self.cut, self.cut[1:]) if b - a <= STAGE_BYTES]
+        self._stage = bytearray(max(sizes, default=0))  # the part being assembled (parts of up to STAGE_BYTES)
+        self.views: list[dict[str, np.ndarray] | None] = [  # per slot of such a part: its fields' values in _stage
+            {name: np.frombuffer(self._stage, dtype=dtype, count=count, offset=offset - self.cut[self.part_of[slot]])
+             if count else np.zeros(0, dtype) for name, (offset, count) in where.items()}
+            if self.cut[self.part_of[slot] + 1] - self.cut[self.part_of[slot]] <= STAGE_BYTES else None
+            for slot, where in enumerate(self.where)]
 
     def stage(self, part: int) -> memoryview | None:
-        """A buffer holding part ``part`` of the file with its metadata in place (its values to be filled), when it is
-        at most ``STAGE_BYTES``; None (a large part: written to the file piece by piece)."""
+        """The buffer of part ``part`` of the file with its metadata in place (its values to be filled in
+        :attr:`views`), when it is at most ``STAGE_BYTES``; None (a large part: written to the file piece by piece)."""
         start, end = self.cut[part], self.cut[part + 1]
         if end - start > STAGE_BYTES:
             return None
-        if self._stage is None or len(self._stage) < end - start:
-            self._stage = bytearray(end - start)
         buf = memoryview(self._stage)[: end - start]
         for offset, data in self.meta[part]:
             buf[offset - start: offset - start + len(data)] = data
         return buf
-
-    def values(self, buf, slot: int, name: str, base: int = 0) -> np.ndarray:
-        """The values of a field at a slot in ``buf``, a copy of the file's bytes from offset ``base`` on (a view)."""
-        offset, count = self.where[slot][name]
-        return (np.frombuffer(buf, dtype=self.dtype, count=count, offset=offset - base) if count
-                else np.zeros(0, self.dtype))
 
 
 class _Chunk:
@@ -404,6 +401,7 @@ class _Chunk:
 
     def __init__(self, path: Path, first: int, slots: int, template) -> None:
         self.path, self.first, self.slots, self.template = path, first, slots, template
+        self.plan = template(slots)  # the template of its slots
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
         self.fd: int | None = None
@@ -421,11 +419,10 @@ class _Chunk:
     def put(self, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
         """A field at a slot: ``values[rows]``, taken straight into its part's buffer (one copy), or into an array
         written at once (a large part)."""
-        full = self.template(self.slots)
         if self._buf is not None:
-            np.take(values, rows, out=full.values(self._buf, slot, name, full.cut[full.part_of[slot]]), mode="clip")
+            np.take(values, rows, out=self.plan.views[slot][name], mode="clip")
             return
-        offset, count = full.where[slot][name]
+        offset, count = self.plan.where[slot][name]
         if count:
             _pwrite(self.fd, np.take(values, rows), offset, self.path)
 
@@ -433,15 +430,19 @@ class _Chunk:
         """Write one level into group ``NNNN``: each field ``values[rows[field]]`` (``values`` a list: the fields' own
         arrays, in the order of ``rows``); its grid is kept once every field is written."""
         slot = len(self.grids)
-        full = self.template(self.slots)
+        full = self.plan
         part = full.part_of[slot]
         if slot == 0 or full.part_of[slot - 1] != part:  # the part's first level
             self._buf, self._part = full.stage(part), part
             if self._buf is None:  # a large part: its metadata now, then each field as it comes
                 for offset, data in full.meta[part]:
                     _pwrite(self.fd, data, offset, self.path)
-        for i, (name, index) in enumerate(rows.items()):
-            _write_dataset(self, slot, name, values[i] if isinstance(values, list) else values, index)
+        if isinstance(values, list):
+            for value, (name, index) in zip(values, rows.items()):
+                _write_dataset(self, slot, name, value, index)
+        else:
+            for name, index in rows.items():
+                _write_dataset(self, slot, name, values, index)
         if slot == full.last[part]:
             self._write_staged()
         self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=f"{slot:04d}"))
@@ -451,7 +452,7 @@ class _Chunk:
         """Write the part being assembled in memory (if any) to the file."""
         if self._buf is not None:
             buf, self._buf = self._buf, None
-            _pwrite(self.fd, buf, self.template(self.slots).cut[self._part], self.path)
+            _pwrite(self.fd, buf, self.plan.cut[self._part], self.path)
 
     def finish(self) -> None:
         """Complete the file: with all its slots written it is; with fewer, the file of those levels is written beside
@@ -467,12 +468,12 @@ class _Chunk:
     def _write_staged_part(self, n: int) -> None:
         """A part left half assembled (a chunk closed early) written, if it holds complete levels, so that they can be
         read back."""
-        if self._buf is not None and n and self.template(self.slots).part_of[n - 1] == self._part:
+        if self._buf is not None and n and self.plan.part_of[n - 1] == self._part:
             self._write_staged()
         self._buf = None
 
     def _rewrite(self, n: int) -> None:
-        full, part = self.template(self.slots), self.template(n)
+        full, part = self.plan, self.template(n)
         tmp = self.path.with_name(self.path.stem + "_part.h5")  # levels_*.h5: removed by a restart if left by a kill
         fd = None
         try:
@@ -572,6 +573,7 @@ class XDMFSeries:
         self._settler: _Settler | None = None
         self._templates: dict[int, _Template] = {}  # rank 0: the chunk files' templates, by levels
         self._setup_gather()
+        self._local = [layout.local[f.center] for f in self.fields]  # this rank's rows of each field
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
         # the mesh is in its file now: neither the whole gathered mesh (rank 0) nor this rank's part is kept
@@ -682,9 +684,8 @@ class XDMFSeries:
         if self.closed:
             raise RuntimeError("write() after close()")
         parts = []
-        for f in self.fields:
+        for f, n in zip(self.fields, self._local):
             v = np.asarray(values[f.name])
-            n = self.layout.local[f.center]
             if v.size != n * f.ncomp:
                 raise ValueError(f"field {f.name}: {v.shape} values for {n} rows of {f.ncomp} components")
             parts.append(v.astype(self.dtype, copy=False).ravel())
