@@ -207,6 +207,11 @@ class DolfinxRows:
         m = self._map(V)
         return np.arange(m.n) if m.index is None else m.index[:: m.width] // m.width
 
+    def entries(self, V) -> np.ndarray:
+        """Where each owned node's (P1) or cell's (DG0) values lie in a function of ``V``'s ``x.array``: (rows, block)."""
+        m = self._map(V)
+        return (np.arange(m.n * m.width) if m.index is None else m.index).reshape(m.n, m.width)
+
     def rows(self, f) -> np.ndarray:
         """Values of ``f`` at this rank's owned nodes (P1) or cells (DG0), one row per node/cell."""
         return self._map(f.function_space).take(f.x.array)
