@@ -71,6 +71,7 @@ import dataclasses
 import os
 import queue
 import re
+import tempfile
 import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -319,6 +320,20 @@ ABOUT = "solver.xdmf chunk: group NNNN holds level FIRST + NNNN of the series (F
 STAGE_BYTES = 4 * 2**20  # a level's part of a chunk file up to this size is assembled in memory and written at once
 
 
+class _FileBytes:
+    """The bytes of an open file, sliced like ``bytes`` (``len`` and ``[a:b]``), read where asked."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd, self.size = fd, os.fstat(fd).st_size
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, item: slice) -> bytes:
+        start, stop, _ = item.indices(self.size)
+        return os.pread(self.fd, max(0, stop - start), start)
+
+
 class _Template:
     """The HDF5 file of a chunk of ``slots`` levels, made once: its bytes other than the datasets' data, and where
     each dataset's data lies (contiguous, allocated at creation).
@@ -331,29 +346,37 @@ class _Template:
     metadata is kept in memory, not an image of the file."""
 
     def __init__(self, fields: Sequence[FieldSpec], counts: Mapping[str, int], dtype: np.dtype, slots: int) -> None:
-        h5 = h5py.File(f"template-{slots}", "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
-        try:
-            h5.attrs["about"] = ABOUT
-            dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-            dcpl.set_obj_track_times(False)  # the same bytes from the same values
-            dcpl.set_layout(h5py.h5d.CONTIGUOUS)
-            dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the data's place known before it is written
-            dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every value is written
-            tid = h5py.h5t.py_create(dtype)
-            self.where: list[dict[str, tuple[int, int]]] = []  # per slot: field -> (offset, values)
-            for slot in range(slots):
-                group = h5py.h5g.create(h5.id, f"{slot:04d}".encode())
-                where = {}
-                for f in fields:
-                    n = counts[f.center]
-                    shape = (n,) if f.ncomp == 1 else (n, f.ncomp)
-                    ds = h5py.h5d.create(group, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
-                    where[f.name] = (ds.get_offset() or 0, n * f.ncomp)  # no offset: no values (0 rows)
-                self.where.append(where)
-            h5.flush()
-            image = h5.id.get_file_image()
-        finally:
-            h5.close()
+        with tempfile.TemporaryDirectory(prefix="xdmf-template-") as tmp:  # a file whose data is never written: its
+            path = Path(tmp) / "chunk.h5"  # metadata on disk, some kB (an HDF5 file in memory held the data's room)
+            h5 = h5py.File(path, "w")
+            try:
+                h5.attrs["about"] = ABOUT
+                dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+                dcpl.set_obj_track_times(False)  # the same bytes from the same values
+                dcpl.set_layout(h5py.h5d.CONTIGUOUS)
+                dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the data's place known before it is written
+                dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every value is written
+                tid = h5py.h5t.py_create(dtype)
+                self.where: list[dict[str, tuple[int, int]]] = []  # per slot: field -> (offset, values)
+                for slot in range(slots):
+                    group = h5py.h5g.create(h5.id, f"{slot:04d}".encode())
+                    where = {}
+                    for f in fields:
+                        n = counts[f.center]
+                        shape = (n,) if f.ncomp == 1 else (n, f.ncomp)
+                        ds = h5py.h5d.create(group, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
+                        where[f.name] = (ds.get_offset() or 0, n * f.ncomp)  # no offset: no values (0 rows)
+                    self.where.append(where)
+            finally:
+                h5.close()
+            fd = os.open(path, os.O_RDONLY)
+            try:
+                self._layout(_FileBytes(fd), dtype, slots)
+            finally:
+                os.close(fd)
+
+    def _layout(self, image: _FileBytes, dtype: np.dtype, slots: int) -> None:
+        """The parts of the file and the metadata in each, from the template's file."""
         self.dtype, self.size, self.slots = dtype, len(image), slots
         spans = [[(o, o + c * dtype.itemsize) for o, c in where.values() if c] for where in self.where]
         # the file is cut before slot s where every earlier slot's data ends and every later slot's begins (HDF5 puts
