@@ -574,6 +574,8 @@ class XDMFSeries:
     order (``(rows, components)``, or ``(rows,)`` for scalars). Rank 0 gathers and writes.
     """
 
+    BLOCK = 65536  # cells a block of the set-up's topology lookup
+
     def __init__(self, directory: str | Path, layout: Layout, fields: Sequence[FieldSpec], precision: str = "double",
                  keep_until: float | None = None, name: str = "solution") -> None:
         if precision not in PRECISIONS:
@@ -614,8 +616,11 @@ class XDMFSeries:
         """Gather every rank's keys once; rank 0 keeps, per rank, the file rows of its owned nodes and cells."""
         comm, lay = self.comm, self.layout
         local = lay.local
-        keys = comm.gather((lay.node_keys, lay.cell_keys), root=0)
-        mesh = comm.gather((lay.points, lay.cells), root=0)
+        if comm.size > 1:
+            keys = comm.gather((lay.node_keys, lay.cell_keys), root=0)
+            mesh = comm.gather((lay.points, lay.cells), root=0)
+        else:  # one process: its own arrays (a gather pickles copies of them)
+            keys, mesh = [(lay.node_keys, lay.cell_keys)], [(lay.points, lay.cells)]
         self.rows_of: list[dict[str, np.ndarray]] = []
         if comm.rank == 0:
             all_nodes = np.concatenate([k[0] for k in keys])
@@ -631,7 +636,9 @@ class XDMFSeries:
             self.cells = np.zeros((lay.counts["Cell"], lay.cells.shape[1]), dtype=np.int64)
             for (pts, cells), rows in zip(mesh, self.rows_of):
                 self.points[rows["Node"]] = pts
-                self.cells[rows["Cell"]] = np.searchsorted(node_sorted, cells)
+                for start in range(0, len(cells), self.BLOCK):  # the cells' node rows a block at a time
+                    block = slice(start, start + self.BLOCK)
+                    self.cells[rows["Cell"][block]] = np.searchsorted(node_sorted, cells[block])
         if not comm.bcast(unique if comm.rank == 0 else None, root=0):
             raise ValueError("XDMF writer: a node or cell is owned by two ranks (keys not unique)")
         lay.counts = comm.bcast(lay.counts, root=0)
@@ -672,8 +679,8 @@ class XDMFSeries:
         path = self.data_dir / f"{self.prefix}mesh.h5"
         tmp = self.data_dir / f".{self.prefix}mesh.h5.tmp"
         with h5py.File(tmp, "w") as h5:
-            h5.create_dataset("geometry", data=self.points.astype("<f8"))
-            h5.create_dataset("topology", data=self.cells.astype("<i8"))
+            h5.create_dataset("geometry", data=self.points.astype("<f8", copy=False))
+            h5.create_dataset("topology", data=self.cells.astype("<i8", copy=False))
         os.replace(tmp, path)
 
     def _continue(self, keep_until: float) -> None:
