@@ -340,10 +340,10 @@ class _Template:
 
     Every chunk of a series has the same groups and datasets, so a chunk's file is these bytes with its levels'
     values written at those offsets instead of an HDF5 group and datasets made per level: the HDF5 calls (some
-    50 us per dataset) are paid once per series and chunk size, not per level and field. The file is cut into one
-    segment per slot, ``[cut[s], cut[s + 1])``, holding that slot's data and the HDF5 metadata around it, so that a
-    level is written as its segment: the file grows level by level and is complete with its last level. Only the
-    metadata is kept in memory, not an image of the file."""
+    50 us per dataset) are paid once per series and chunk size, not per level and field. The file is cut into parts,
+    ``[cut[p], cut[p + 1])``, each holding a slot's data and the HDF5 metadata around it (several slots' where HDF5
+    put their small datasets in one block), so that the file is written part by part as its levels come and is
+    complete with its last level. Only the metadata is kept in memory, not an image of the file."""
 
     def __init__(self, fields: Sequence[FieldSpec], counts: Mapping[str, int], dtype: np.dtype, slots: int) -> None:
         with tempfile.TemporaryDirectory(prefix="xdmf-template-") as tmp:  # a file whose data is never written: its
