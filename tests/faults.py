@@ -11,7 +11,8 @@ contact.xdmf are neither counted nor faulted):
 - ``data``: the k-th written level, after its first field is written (its chunk open, the level half done);
 - ``close``: the k-th chunk, just after its file was written (complete, not yet listed in the XML);
 - ``file``: the k-th file written, half of it: chunk files and XML temporaries alternate (chunk 1, the XML
-  listing it, chunk 2, ...); a chunk file is not yet listed, a temporary not yet renamed over solution.xdmf.
+  listing it, chunk 2, ...); a chunk file (written level by level) is cut to half once complete, not yet listed;
+  a temporary is not yet renamed over solution.xdmf.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def install(spec: str) -> None:
 
         sx._close_chunk = close_chunk
     else:
-        write_file = sx._write_file
+        write_file, close = sx._write_file, sx._close_chunk
 
         def write_half(path, data):
             if body(path) and hit():
@@ -80,7 +81,13 @@ def install(spec: str) -> None:
                 _fault(action, path)
             write_file(path, data)
 
-        sx._write_file = write_half
+        def close_half(chunk):  # a chunk's file is written level by level: its end cut off when it is complete
+            close(chunk)
+            if body(chunk.path) and hit():
+                os.truncate(chunk.path, os.path.getsize(chunk.path) // 2)
+                _fault(action, chunk.path)
+
+        sx._write_file, sx._close_chunk = write_half, close_half
 
 
 def command(spec: str, args: list[str]) -> list[str]:

@@ -52,6 +52,20 @@ def _order(coords: np.ndarray) -> np.ndarray:
     return np.lexsort(c.T[::-1])
 
 
+BLOCK = 65536  # rows a block of a sorted write: 1.5 MB of coordinates and up to 5 MB of values in 3-D
+
+
+def _write_sorted(h5, name: str, coords: np.ndarray, values: np.ndarray) -> None:
+    """``NAME/coords`` and ``NAME/values`` in the order of the points (:func:`_order`), written a block of rows at a
+    time: no sorted copy of the whole field beside it (M alone is 40 MiB at 311,469 dofs in 3-D)."""
+    order = _order(coords)
+    for key, data in (("coords", coords), ("values", values)):
+        ds = h5.create_dataset(f"{name}/{key}", shape=data.shape, dtype=data.dtype)
+        for start in range(0, len(order), BLOCK):
+            rows = order[start: start + BLOCK]
+            ds[start: start + len(rows)] = data[rows]
+
+
 @dataclass
 class _Field:
     coords: np.ndarray  # dof coordinates (owned first)
@@ -109,8 +123,9 @@ def write(directory: Path, model, step: int, t: float, part: int, clock=None) ->
     """Write the checkpoint of level ``step`` (collective; rank 0 writes); ``clock``: an adaptive run's
     :class:`solver.run.adaptive.StepController`, whose step history and past levels it keeps too.
 
-    Streamed: one field at a time is gathered to rank 0, sorted and written, so that the write holds at most one
-    field's gathered copy beside the state (one process gathers nothing: its own arrays are written)."""
+    Streamed: one field at a time is gathered to rank 0, sorted and written a block of rows at a time, so that the
+    write holds at most one field's gathered copy beside the state and no sorted copy of it (one process gathers
+    nothing: its own arrays are written)."""
     comm = model.comm
     fields = _fields(model, clock)
     path = Path(directory) / NAME
@@ -134,11 +149,8 @@ def write(directory: Path, model, step: int, t: float, part: int, clock=None) ->
             coords = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
             values = parts[0][1] if len(parts) == 1 else np.concatenate([p[1] for p in parts])
             del parts
-            order = _order(coords)
-            h5.create_dataset(f"{name}/coords", data=coords[order])
-            del coords
-            h5.create_dataset(f"{name}/values", data=values[order])
-            del values
+            _write_sorted(h5, name, coords, values)
+            del coords, values
         except Exception as exc:  # noqa: BLE001
             error = exc
 

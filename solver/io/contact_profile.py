@@ -27,7 +27,9 @@ class ProfileWriter:
     def __init__(self, path: Path, comm: MPI.Comm, traces: ContactTraces, keep_step: int | None = None) -> None:
         self.path, self.comm, self.traces = path, comm, traces
         self.fd: int | None = None  # rank 0: the file, open for appending while the run lasts
-        self._templates: dict[str, tuple[bytes, str]] = {}  # rank 0: per part, its lines' format (_template)
+        self._templates: dict[str, tuple[bytes, str]] = {}  # rank 0: per part, its lines' format with the gap fixed
+        self._heads: dict[str, tuple[bytes, str]] = {}  # ... with s and the point fixed only (_template)
+        self._previous: dict[str, bytes] = {}  # ... the fixed columns (with the gap) of the last level formatted
 
         def start() -> None:
             kept = []
@@ -46,8 +48,11 @@ class ProfileWriter:
 
         def append() -> None:
             lead = f"{step},{float(t)!r},".replace("%", "%%")
-            data = "".join(self._template(name, rows).replace("\0", lead) % tuple(rows[:, HEAD:].ravel().tolist())
-                           for name, rows in parts).encode()
+            text = []
+            for name, rows in parts:
+                template, fixed = self._template(name, rows)
+                text.append(template.replace("\0", lead) % tuple(rows[:, fixed:].ravel().tolist()))
+            data = "".join(text).encode()
             try:
                 if os.write(self.fd, data) != len(data):
                     raise OSError(28, "No space left on device (short write)", str(self.path))
@@ -58,18 +63,32 @@ class ProfileWriter:
 
         on_rank0(self.comm, append)
 
-    def _template(self, name: str, rows: np.ndarray) -> str:
-        """A part's lines with its fixed columns (s and the point) written out, \\0 for the lead (step, t) and %r
-        for each of the others: a level is one % format, the same text as repr of each value (its fixed columns'
-        reprs made once). Made again if the fixed columns change."""
-        head = np.ascontiguousarray(rows[:, :HEAD])
+    def _template(self, name: str, rows: np.ndarray) -> tuple[str, int]:
+        """A part's lines with its fixed columns written out, \\0 for the lead (step, t) and %r for each of the others,
+        and the number of fixed columns: a level is one % format, the same text as repr of each value (the fixed
+        columns' reprs made once). Fixed: s and the point, and the gap once two levels in a row had the same (a gap
+        that moves is formatted per level). Made again when they change."""
+        fixed = np.ascontiguousarray(rows[:, : HEAD + 1]).tobytes()
         kept = self._templates.get(name)
-        if kept is None or kept[0] != head.tobytes():
-            tail = ",%r" * (rows.shape[1] - HEAD) + "\n"
-            text = "".join("\0" + (name + "," + ",".join(map(repr, row))).replace("%", "%%") + tail
-                           for row in head.tolist())
-            kept = self._templates[name] = (head.tobytes(), text)
-        return kept[1]
+        if kept is not None and kept[0] == fixed:
+            return kept[1], HEAD + 1
+        if self._previous.get(name) == fixed:  # the same gap again: part of the template from now on
+            self._templates[name] = (fixed, self._lines(name, rows, HEAD + 1))
+            return self._templates[name][1], HEAD + 1
+        self._previous[name] = fixed
+        head = np.ascontiguousarray(rows[:, :HEAD]).tobytes()
+        kept = self._heads.get(name)
+        if kept is None or kept[0] != head:
+            kept = self._heads[name] = (head, self._lines(name, rows, HEAD))
+        return kept[1], HEAD
+
+    @staticmethod
+    def _lines(name: str, rows: np.ndarray, fixed: int) -> str:
+        """The lines of a part with its first ``fixed`` columns written out (repr), \\0 for the lead and %r for the
+        others."""
+        tail = ",%r" * (rows.shape[1] - fixed) + "\n"
+        return "".join("\0" + (name + "," + ",".join(map(repr, row))).replace("%", "%%") + tail
+                       for row in rows[:, :fixed].tolist())
 
     def close(self) -> None:
         if self.fd is not None:

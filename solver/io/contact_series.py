@@ -70,13 +70,22 @@ class ContactSeries:
         layout = facet_layout(geo, tuple(part.name for part in traces.parts), self.on_node)
         specs = [FieldSpec(name, "Node", "Scalar") for name in FIELDS] + [FieldSpec("displacement", "Node", "Vector")]
         self.series = XDMFSeries(directory, layout, specs, precision, keep_until, name=NAME)
+        self._u_index: tuple | None = None  # (u's space, its owned Γ_C nodes' entries in u.x.array, components)
 
     def write(self, t: float) -> None:
         """Level t (collective)."""
-        values = {name: getattr(self.traces, ATTRIBUTES[name]).x.array[self.node_dof] for name in FIELDS}
+        values = {name: np.take(getattr(self.traces, ATTRIBUTES[name]).x.array, self.node_dof) for name in FIELDS}
         u: fem.Function = self.displacement()
-        values["displacement"] = vector3(self.rows.rows(u)[self.on_node])
+        values["displacement"] = vector3(self._displacement_rows(u))
         self.series.write(t, values)
+
+    def _displacement_rows(self, u: fem.Function) -> np.ndarray:
+        """u's rows at Γ_C's owned nodes (one take through an index made once per function space)."""
+        space = u.function_space
+        if self._u_index is None or self._u_index[0] is not space:
+            entries = self.rows.entries(space)[self.on_node]
+            self._u_index = (space, entries.ravel(), entries.shape[1])
+        return np.take(u.x.array, self._u_index[1]).reshape(-1, self._u_index[2])
 
     def flush(self) -> None:
         self.series.flush()

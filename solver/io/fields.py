@@ -82,6 +82,10 @@ class CellStresses:
             self._strain_points = np.arange(n_cells)[:, None]
             self._strain = lambda: (E @ self.u.x.array).reshape(len(self.pairs), -1)
         self.n_cells = n_cells
+        # one point per cell, the cells' own in order (P1, a one-point rule, serial or not): blocks of the arrays are
+        # slices, no gathers
+        self._in_order = self._strain_points.shape[1] == 1 and np.array_equal(self._strain_points[:, 0],
+                                                                                np.arange(n_cells))
         self._eps = self._memory = self._memory_zz = None
 
     def prepare(self) -> None:
@@ -103,12 +107,7 @@ class CellStresses:
         if rows is None:
             self.prepare()
             rows = slice(None)
-        eps = self._eps
-        points = self._strain_points[rows]
-        if points.shape[1] == 1:
-            e = eps[:, points[:, 0]]  # (component, cell)
-        else:
-            e = (eps[:, points] * self.q_weights[:, :, 0]).sum(axis=2)
+        e = self._strains(rows)
         d = self.d
         s = np.empty((e.shape[1], d, d))
         trace = e[:d].sum(axis=0)
@@ -119,6 +118,31 @@ class CellStresses:
             else:
                 s[:, i, j] = s[:, j, i] = 2.0 * self.lame_mu * e[k]
         return s.reshape(len(s), d * d)
+
+    def _strains(self, rows: slice) -> np.ndarray:
+        """eps(u)'s independent components averaged over each cell of ``rows``: (component, cell)."""
+        eps = self._eps
+        if self._in_order:
+            return eps[:, : self.n_cells][:, rows]
+        points = self._strain_points[rows]
+        if points.shape[1] == 1:
+            return np.take(eps, points[:, 0], axis=1)
+        return (eps[:, points] * self.q_weights[:, :, 0]).sum(axis=2)
+
+    def von_mises_plane(self, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+        """(von Mises of sigma, of A eps(u)) per cell of ``rows`` in plane stress (2-D, after :meth:`prepare`), from
+        the components: the values of :func:`von_mises_array` of :meth:`total` and :meth:`elastic`, the same
+        operations on the same numbers, without the d x d tensors."""
+        e = self._strains(rows)
+        trace = e[:2].sum(axis=0)
+        two_mu, lam = 2.0 * self.lame_mu, self.lame_lambda
+        a, b, c = two_mu * e[0] + lam * trace, two_mu * e[1] + lam * trace, two_mu * e[2]
+        elastic = np.sqrt(a * a + b * b - a * b + 3 * c * c)
+        if self.history is None:
+            return elastic, elastic
+        m = self._cell_average(self._memory, self._strain_points, 4, rows)  # rows of xx, xy, yx, yy
+        a, b, c = a + m[:, 0], b + m[:, 3], c + m[:, 1]
+        return np.sqrt(a * a + b * b - a * b + 3 * c * c), elastic
 
     def total(self, elastic: np.ndarray, rows: slice | None = None) -> np.ndarray:
         """sigma = A eps(u) + (cell average of M), given A eps(u) of the same cells."""
@@ -136,6 +160,8 @@ class CellStresses:
 
     def _cell_average(self, memory: np.ndarray, points: np.ndarray, width: int, rows: slice | None) -> np.ndarray:
         """Cell averages of a memory tensor at the rule's points (rows of ``width``)."""
+        if self._in_order:
+            return memory.reshape(-1, width)[: self.n_cells][slice(None) if rows is None else rows]
         points = points[slice(None) if rows is None else rows]
         M = np.take(memory.reshape(-1, width), points.ravel(), axis=0)
         if self.npts == 1:  # one point per cell: the average is the value
@@ -209,8 +235,14 @@ class Outputs:
             if st.plane_strain:
                 out[name + "_zz"] = np.empty(n)
         st.prepare()
+        plane = d == 2 and not st.plane_strain and not tensors and want & {"von_mises", "von_mises_elastic"}
         for start in range(0, n, self.BLOCK):
             rows = slice(start, min(start + self.BLOCK, n))
+            if plane:  # the von Mises values alone, from the components
+                block = dict(zip(("von_mises", "von_mises_elastic"), st.von_mises_plane(rows)))
+                for name, values in out.items():
+                    values[rows] = block[name]
+                continue
             block = {"elastic_stress": st.elastic(rows)}
             if want & {"stress", "von_mises"}:
                 block["stress"] = st.total(block["elastic_stress"], rows)

@@ -27,13 +27,12 @@ keeps each one open (past the usual limit of 1024 descriptors).
 
 **Crash safety (process death: SIGKILL, OOM killer, a cancelled job).** The XML lists only
 levels of chunk files that were written completely and will not be written again.
-- *Data.* The chunk being filled is the image of an HDF5 file in memory on rank 0.
-  It is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at every
-  :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at
-  :meth:`XDMFSeries.close`: its image is then written to its file in one plain write, and
-  only after that are its levels listed. A kill before or during that write leaves at most
-  an unlisted file. No HDF5 file is ever open for writing on disk, and a listed file is only
-  ever read.
+- *Data.* The chunk being filled is a plain file on rank 0, written level by level at the offsets its HDF5
+  template gives (see *Cost*); it is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at
+  every :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at :meth:`XDMFSeries.close`
+  (a chunk closed before it is full is written again as the file of its levels only, beside it, and renamed over
+  it), and only after that are its levels listed. A kill before leaves at most an unlisted file. No HDF5 file is
+  ever open for writing on disk, and a listed file is only ever read.
 - *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
   ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
   atomic on POSIX). A reader, or the file left by a kill, sees the old list or the new one.
@@ -47,13 +46,15 @@ they survive the death of the process, not of the machine.
 
 **Cost.** The groups and datasets of a chunk are made by HDF5 once per series and chunk size
 (:class:`_Template`: contiguous datasets allocated at creation, whose data offsets in the file are then known);
-a level copies its values into the chunk's image at those offsets, with no HDF5 call (a dataset made per level
-and field cost some 50 us, most of the writer's time). The XML is rewritten once per closed chunk, so its cost
-per level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the
-calling thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each
-closed chunk (``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the
-kernel does not write GBs of dirty pages back late in a long run, where that slows the memory-bound solves
-(``SETTLE_CHUNKS``).
+a level's values are written into the chunk's file at those offsets, with no HDF5 call (a dataset made per level
+and field cost some 50 us, most of the writer's time). A level's part of the file (its data and the HDF5 metadata
+around it; several levels' where HDF5 put their small datasets in one block) of up to ``STAGE_BYTES`` is assembled
+in memory and written with one call; a larger one is written field by field, so that the writer holds one field of
+the level beside the solver's state, never a chunk. The XML is rewritten once per closed chunk, so its cost per
+level is the file's size over the levels per chunk: O(listed levels / 100). Levels are written in the calling
+thread. (Figures: docs/developer/design-notes.md, docs/benchmarks/speed.md.) One thread settles each closed chunk
+(``fdatasync``, then its pages dropped from the page cache; both release the GIL), so that the kernel does not write
+GBs of dirty pages back late in a long run, where that slows the memory-bound solves (``SETTLE_CHUNKS``).
 
 **Failures.** A write that fails (a full disk: ENOSPC) raises :class:`SeriesError` with one
 line and the time ``t`` of the failed level (for a chunk's file or the XML: of the chunk's
@@ -65,10 +66,12 @@ This module needs numpy, h5py and mpi4py; dolfinx only for :func:`dolfinx_layout
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import os
 import queue
 import re
+import tempfile
 import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -86,7 +89,7 @@ CENTERS = ("Node", "Cell")
 CELL_TYPES = {("triangle", 3): "Triangle", ("tetrahedron", 4): "Tetrahedron"}
 FACET_TYPES = {2: "Polyline", 3: "Triangle"}  # a boundary's facets (contact.xdmf): segments in 2-D, triangles in 3-D
 MAX_LEVELS_PER_CHUNK = 100
-CHUNK_BYTES = 64 * 2**20  # an open chunk is held in memory on rank 0
+CHUNK_BYTES = 64 * 2**20  # the largest chunk file
 SETTLE_CHUNKS = True  # fdatasync each closed chunk and drop its pages, in a thread (see _Settler)
 
 _HEAD = ('<?xml version="1.0"?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n<Xdmf Version="3.0">\n  <Domain>\n'
@@ -205,6 +208,11 @@ class DolfinxRows:
         m = self._map(V)
         return np.arange(m.n) if m.index is None else m.index[:: m.width] // m.width
 
+    def entries(self, V) -> np.ndarray:
+        """Where each owned node's (P1) or cell's (DG0) values lie in a function of ``V``'s ``x.array``: (rows, block)."""
+        m = self._map(V)
+        return (np.arange(m.n * m.width) if m.index is None else m.index).reshape(m.n, m.width)
+
     def rows(self, f) -> np.ndarray:
         """Values of ``f`` at this rank's owned nodes (P1) or cells (DG0), one row per node/cell."""
         return self._map(f.function_space).take(f.x.array)
@@ -260,8 +268,8 @@ def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndar
 
 
 def _write_dataset(chunk: _Chunk, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
-    """One field of one level: ``values[rows]`` (the field in file order) copied into the chunk's image, where its
-    dataset's data lies."""
+    """One field of one level: ``values[rows]`` (the field in file order) written where its dataset's data lies in
+    the chunk's file (through the level's staging buffer when the level is small)."""
     chunk.put(slot, name, values, rows)
 
 
@@ -275,9 +283,9 @@ def _write_file(path: Path, data: bytes) -> None:
 
 
 def _close_chunk(chunk: _Chunk) -> None:
-    """Write a chunk's image, complete, to its path."""
-    _write_file(chunk.path, chunk.image())
-    chunk.recycle()
+    """Complete a chunk's file: a full chunk's is complete once its last level is written; one closed early is
+    written again as the file of its levels only."""
+    chunk.finish()
 
 
 def _remove(path: Path) -> None:
@@ -297,123 +305,232 @@ def _replace_file(path: Path, tmp: Path, data: bytes) -> None:
         raise
 
 
+def _pwrite(fd: int, data, offset: int, path: Path) -> None:
+    """All of ``data`` (bytes or a contiguous array) at ``offset`` of the open file ``fd`` (a failure names the file)."""
+    view = memoryview(data).cast("B")
+    try:
+        while len(view):
+            done = os.pwrite(fd, view, offset)
+            view, offset = view[done:], offset + done
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+
+
 ABOUT = "solver.xdmf chunk: group NNNN holds level FIRST + NNNN of the series (FIRST: the number in the file name)"
+STAGE_BYTES = 4 * 2**20  # a level's part of a chunk file up to this size is assembled in memory and written at once
+
+
+class _FileBytes:
+    """The bytes of an open file, sliced like ``bytes`` (``len`` and ``[a:b]``), read where asked."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd, self.size = fd, os.fstat(fd).st_size
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, item: slice) -> bytes:
+        start, stop, _ = item.indices(self.size)
+        return os.pread(self.fd, max(0, stop - start), start)
 
 
 class _Template:
     """The HDF5 file of a chunk of ``slots`` levels, made once: its bytes other than the datasets' data, and where
     each dataset's data lies (contiguous, allocated at creation).
 
-    Every chunk of a series has the same groups and datasets, so a chunk is this file with its levels' values
-    copied in at those offsets (a memcpy per field) instead of an HDF5 group and datasets made per level: the
-    HDF5 calls (some 50 us per dataset) are paid once per series and chunk size, not per level and field."""
+    Every chunk of a series has the same groups and datasets, so a chunk's file is these bytes with its levels'
+    values written at those offsets instead of an HDF5 group and datasets made per level: the HDF5 calls (some
+    50 us per dataset) are paid once per series and chunk size, not per level and field. The file is cut into parts,
+    ``[cut[p], cut[p + 1])``, each holding a slot's data and the HDF5 metadata around it (several slots' where HDF5
+    put their small datasets in one block), so that the file is written part by part as its levels come and is
+    complete with its last level. Only the metadata is kept in memory, not an image of the file."""
 
     def __init__(self, fields: Sequence[FieldSpec], counts: Mapping[str, int], dtype: np.dtype, slots: int) -> None:
-        h5 = h5py.File(f"template-{slots}", "w", driver="core", backing_store=False, block_size=2**20)  # not on disk
-        try:
-            h5.attrs["about"] = ABOUT
-            dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-            dcpl.set_obj_track_times(False)  # the same bytes from the same values
-            dcpl.set_layout(h5py.h5d.CONTIGUOUS)
-            dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the data's place known before it is written
-            dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every value is written
-            tid = h5py.h5t.py_create(dtype)
-            self.where: list[dict[str, tuple[int, int]]] = []  # per slot: field -> (offset, values)
-            for slot in range(slots):
-                group = h5py.h5g.create(h5.id, f"{slot:04d}".encode())
-                where = {}
-                for f in fields:
-                    n = counts[f.center]
-                    shape = (n,) if f.ncomp == 1 else (n, f.ncomp)
-                    ds = h5py.h5d.create(group, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
-                    where[f.name] = (ds.get_offset() or 0, n * f.ncomp)  # no offset: no values (0 rows)
-                self.where.append(where)
-            h5.flush()
-            image = h5.id.get_file_image()
-        finally:
-            h5.close()
-        self.dtype, self.size = dtype, len(image)
-        head, at = [], 0  # the metadata (HDF5's own bytes): what lies between the datasets' values
-        for offset, count in sorted(v for where in self.where for v in where.values() if v[1]):
-            if offset > at:
-                head.append((at, image[at:offset]))
-            at = max(at, offset + count * dtype.itemsize)
-        self.head = head + ([(at, image[at:])] if at < len(image) else [])
-        self.spare: bytearray | None = None
+        with tempfile.TemporaryDirectory(prefix="xdmf-template-") as tmp:  # a file whose data is never written: its
+            path = Path(tmp) / "chunk.h5"  # metadata on disk, some kB (an HDF5 file in memory held the data's room)
+            h5 = h5py.File(path, "w")
+            try:
+                h5.attrs["about"] = ABOUT
+                dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+                dcpl.set_obj_track_times(False)  # the same bytes from the same values
+                dcpl.set_layout(h5py.h5d.CONTIGUOUS)
+                dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)  # the data's place known before it is written
+                dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)  # every value is written
+                tid = h5py.h5t.py_create(dtype)
+                self.where: list[dict[str, tuple[int, int]]] = []  # per slot: field -> (offset, values)
+                for slot in range(slots):
+                    group = h5py.h5g.create(h5.id, f"{slot:04d}".encode())
+                    where = {}
+                    for f in fields:
+                        n = counts[f.center]
+                        shape = (n,) if f.ncomp == 1 else (n, f.ncomp)
+                        ds = h5py.h5d.create(group, f.name.encode(), tid, h5py.h5s.create_simple(shape), dcpl=dcpl)
+                        where[f.name] = (ds.get_offset() or 0, n * f.ncomp)  # no offset: no values (0 rows)
+                    self.where.append(where)
+            finally:
+                h5.close()
+            fd = os.open(path, os.O_RDONLY)
+            try:
+                self._layout(_FileBytes(fd), dtype, slots)
+            finally:
+                os.close(fd)
 
-    def recycle(self, image: bytearray) -> None:
-        """Take back an image once its file is written: the next chunk's, its values all written again (no new
-        memory to allocate and fault in per chunk)."""
-        self.spare = image
+    def _layout(self, image: _FileBytes, dtype: np.dtype, slots: int) -> None:
+        """The parts of the file and the metadata in each, from the template's file."""
+        self.dtype, self.size, self.slots = dtype, len(image), slots
+        spans = [[(o, o + c * dtype.itemsize) for o, c in where.values() if c] for where in self.where]
+        # the file is cut before slot s where every earlier slot's data ends and every later slot's begins (HDF5 puts
+        # small datasets of several slots in one block: those slots share a part)
+        ends = np.maximum.accumulate([max((b for _, b in sp), default=0) for sp in spans])
+        starts = np.minimum.accumulate([min((a for a, _ in sp), default=self.size) for sp in spans][::-1])[::-1]
+        firsts = [0] + [s for s in range(1, slots) if ends[s - 1] <= starts[s]]
+        self.cut = [0] + [int(starts[s]) for s in firsts[1:]] + [self.size]  # part p: [cut[p], cut[p + 1])
+        self.part_of = np.repeat(np.arange(len(firsts)), np.diff(firsts + [slots])).tolist()  # slot -> its part
+        self.last = [f - 1 for f in firsts[1:]] + [slots - 1]  # part -> its last slot
+        head, at = [], 0  # the metadata (HDF5's own bytes): what lies between the datasets' values, cut at the parts
+        for offset, end in sorted(v for span in spans for v in span) + [(self.size, self.size)]:
+            while offset > at:
+                stop = min(offset, next(c for c in self.cut if c > at))
+                head.append((at, image[at:stop]))
+                at = stop
+            at = max(at, end)
+        self.meta: list[list[tuple[int, bytes]]] = [[] for _ in firsts]  # per part: the metadata in it
+        for offset, part in head:
+            self.meta[min(bisect.bisect_right(self.cut, offset) - 1, len(firsts) - 1)].append((offset, part))
+        sizes = [b - a for a, b in zip(self.cut, self.cut[1:]) if b - a <= STAGE_BYTES]
+        self._stage = bytearray(max(sizes, default=0))  # the part being assembled (parts of up to STAGE_BYTES)
+        self.views: list[dict[str, np.ndarray] | None] = [  # per slot of such a part: its fields' values in _stage
+            {name: np.frombuffer(self._stage, dtype=dtype, count=count, offset=offset - self.cut[self.part_of[slot]])
+             if count else np.zeros(0, dtype) for name, (offset, count) in where.items()}
+            if self.cut[self.part_of[slot] + 1] - self.cut[self.part_of[slot]] <= STAGE_BYTES else None
+            for slot, where in enumerate(self.where)]
 
-    def image(self) -> bytearray:
-        """An image of the file: its metadata, and zeros (or the values of a written chunk: :meth:`recycle`) where
-        the values go."""
-        if self.spare is not None:
-            out, self.spare = self.spare, None
-            return out
-        out = bytearray(self.size)
-        for offset, part in self.head:
-            out[offset: offset + len(part)] = part
-        return out
-
-    def values(self, image: bytearray, slot: int, name: str) -> np.ndarray:
-        """The values of a field at a slot, a view into ``image``."""
-        offset, count = self.where[slot][name]
-        return np.frombuffer(image, dtype=self.dtype, count=count, offset=offset) if count else np.zeros(0, self.dtype)
+    def stage(self, part: int) -> memoryview | None:
+        """The buffer of part ``part`` of the file with its metadata in place (its values to be filled in
+        :attr:`views`), when it is at most ``STAGE_BYTES``; None (a large part: written to the file piece by piece)."""
+        start, end = self.cut[part], self.cut[part + 1]
+        if end - start > STAGE_BYTES:
+            return None
+        buf = memoryview(self._stage)[: end - start]
+        for offset, data in self.meta[part]:
+            buf[offset - start: offset - start + len(data)] = data
+        return buf
 
 
 class _Chunk:
-    """A chunk being filled (rank 0): the image of its HDF5 file in memory, written to ``path`` when closed.
+    """A chunk being filled (rank 0): its HDF5 file, written a level at a time and listed once it is closed.
 
-    Kept in memory, an open chunk never leaves a half-written HDF5 file behind it: a full disk fails the one
-    plain write of its image. It costs up to ``CHUNK_BYTES`` of memory on rank 0. ``template(n)`` gives the
-    :class:`_Template` of n slots: a chunk closed before it is full is written as the file of its levels only.
+    The file is a plain file written at the offsets its :class:`_Template` gives (never opened by HDF5 for writing);
+    until its levels are listed, a kill leaves it unlisted, and a restart or the next run removes it. A level of up
+    to ``STAGE_BYTES`` is assembled in memory and written with one call; a larger one is written field by field, so
+    that the writer holds one field beside the solver's state. ``template(n)`` gives the :class:`_Template` of n
+    slots: a chunk closed before it is full is written again as the file of its levels only (``finish``).
     """
 
     def __init__(self, path: Path, first: int, slots: int, template) -> None:
         self.path, self.first, self.slots, self.template = path, first, slots, template
+        self.plan = template(slots)  # the template of its slots
         self.grids: list[str] = []  # the XML of its complete levels, listed once the file is closed
         self.times: list[float] = []
-        self.full_image = template(slots).image()
+        self.fd: int | None = None
+        try:
+            self.fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        self._buf: memoryview | None = None  # the part being assembled in memory (small parts), and its index
+        self._part = -1
 
     @property
     def full(self) -> bool:
         return len(self.grids) >= self.slots
 
     def put(self, slot: int, name: str, values: np.ndarray, rows: np.ndarray) -> None:
-        """A field at a slot: ``values[rows]``, taken straight into the image (one copy)."""
-        np.take(values, rows, out=self.template(self.slots).values(self.full_image, slot, name), mode="clip")
+        """A field at a slot: ``values[rows]``, taken straight into its part's buffer (one copy), or into an array
+        written at once (a large part)."""
+        if self._buf is not None:
+            np.take(values, rows, out=self.plan.views[slot][name], mode="clip")
+            return
+        offset, count = self.plan.where[slot][name]
+        if count:
+            _pwrite(self.fd, np.take(values, rows), offset, self.path)
 
     def add(self, t: float, values: np.ndarray | list[np.ndarray], rows: Mapping[str, np.ndarray], grid_format: str) -> None:
         """Write one level into group ``NNNN``: each field ``values[rows[field]]`` (``values`` a list: the fields' own
         arrays, in the order of ``rows``); its grid is kept once every field is written."""
         slot = len(self.grids)
-        for i, (name, index) in enumerate(rows.items()):
-            _write_dataset(self, slot, name, values[i] if isinstance(values, list) else values, index)
+        full = self.plan
+        part = full.part_of[slot]
+        if slot == 0 or full.part_of[slot - 1] != part:  # the part's first level
+            self._buf, self._part = full.stage(part), part
+            if self._buf is None:  # a large part: its metadata now, then each field as it comes
+                for offset, data in full.meta[part]:
+                    _pwrite(self.fd, data, offset, self.path)
+        if isinstance(values, list):
+            for value, (name, index) in zip(values, rows.items()):
+                _write_dataset(self, slot, name, value, index)
+        else:
+            for name, index in rows.items():
+                _write_dataset(self, slot, name, values, index)
+        if slot == full.last[part]:
+            self._write_staged()
         self.grids.append(grid_format.format(t=repr(float(t)), file=f"fields/{self.path.name}", slot=f"{slot:04d}"))
         self.times.append(t)
 
-    def image(self) -> bytearray:
-        """The file of the complete levels (all slots: the image filled; fewer: their values in a smaller file)."""
-        n = len(self.grids)
-        if n == self.slots:
-            return self.full_image
-        full, part = self.template(self.slots), self.template(n)
-        out = part.image()
-        for slot in range(n):
-            for name in part.where[slot]:
-                part.values(out, slot, name)[:] = full.values(self.full_image, slot, name)
-        return out
+    def _write_staged(self) -> None:
+        """Write the part being assembled in memory (if any) to the file."""
+        if self._buf is not None:
+            buf, self._buf = self._buf, None
+            _pwrite(self.fd, buf, self.plan.cut[self._part], self.path)
 
-    def recycle(self) -> None:
-        """Give the image back to the template (the file written)."""
-        self.template(self.slots).recycle(self.full_image)
-        self.drop()
+    def finish(self) -> None:
+        """Complete the file: with all its slots written it is; with fewer, the file of those levels is written beside
+        it (one field at a time, read back from it) and renamed over it."""
+        n = len(self.grids)
+        try:
+            if n < self.slots:
+                self._write_staged_part(n)
+                self._rewrite(n)
+        finally:
+            self.drop()
+
+    def _write_staged_part(self, n: int) -> None:
+        """A part left half assembled (a chunk closed early) written, if it holds complete levels, so that they can be
+        read back."""
+        if self._buf is not None and n and self.plan.part_of[n - 1] == self._part:
+            self._write_staged()
+        self._buf = None
+
+    def _rewrite(self, n: int) -> None:
+        full, part = self.plan, self.template(n)
+        tmp = self.path.with_name(self.path.stem + "_part.h5")  # levels_*.h5: removed by a restart if left by a kill
+        fd = None
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            for slot in range(n):
+                for offset, data in part.meta[slot]:
+                    _pwrite(fd, data, offset, tmp)
+                for name, (offset, count) in part.where[slot].items():
+                    if count:
+                        _pwrite(fd, os.pread(self.fd, count * full.dtype.itemsize, full.where[slot][name][0]), offset,
+                                tmp)
+            os.close(fd)
+            fd = None
+            os.replace(tmp, self.path)
+        except BaseException:
+            if fd is not None:
+                os.close(fd)
+            _remove(tmp)
+            raise
 
     def drop(self) -> None:
-        """Forget the image (a failed or killed chunk)."""
-        self.full_image = bytearray()
+        """Close the file as it is (a failed or killed chunk: left unlisted)."""
+        self._buf = None
+        if self.fd is not None:
+            fd, self.fd = self.fd, None
+            try:
+                os.close(fd)
+            except OSError:
+                pass
 
 
 class _Settler:
@@ -457,6 +574,8 @@ class XDMFSeries:
     order (``(rows, components)``, or ``(rows,)`` for scalars). Rank 0 gathers and writes.
     """
 
+    BLOCK = 65536  # cells a block of the set-up's topology lookup
+
     def __init__(self, directory: str | Path, layout: Layout, fields: Sequence[FieldSpec], precision: str = "double",
                  keep_until: float | None = None, name: str = "solution") -> None:
         if precision not in PRECISIONS:
@@ -484,6 +603,7 @@ class XDMFSeries:
         self._settler: _Settler | None = None
         self._templates: dict[int, _Template] = {}  # rank 0: the chunk files' templates, by levels
         self._setup_gather()
+        self._local = [layout.local[f.center] for f in self.fields]  # this rank's rows of each field
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
         # the mesh is in its file now: neither the whole gathered mesh (rank 0) nor this rank's part is kept
@@ -496,8 +616,11 @@ class XDMFSeries:
         """Gather every rank's keys once; rank 0 keeps, per rank, the file rows of its owned nodes and cells."""
         comm, lay = self.comm, self.layout
         local = lay.local
-        keys = comm.gather((lay.node_keys, lay.cell_keys), root=0)
-        mesh = comm.gather((lay.points, lay.cells), root=0)
+        if comm.size > 1:
+            keys = comm.gather((lay.node_keys, lay.cell_keys), root=0)
+            mesh = comm.gather((lay.points, lay.cells), root=0)
+        else:  # one process: its own arrays (a gather pickles copies of them)
+            keys, mesh = [(lay.node_keys, lay.cell_keys)], [(lay.points, lay.cells)]
         self.rows_of: list[dict[str, np.ndarray]] = []
         if comm.rank == 0:
             all_nodes = np.concatenate([k[0] for k in keys])
@@ -513,7 +636,9 @@ class XDMFSeries:
             self.cells = np.zeros((lay.counts["Cell"], lay.cells.shape[1]), dtype=np.int64)
             for (pts, cells), rows in zip(mesh, self.rows_of):
                 self.points[rows["Node"]] = pts
-                self.cells[rows["Cell"]] = np.searchsorted(node_sorted, cells)
+                for start in range(0, len(cells), self.BLOCK):  # the cells' node rows a block at a time
+                    block = slice(start, start + self.BLOCK)
+                    self.cells[rows["Cell"][block]] = np.searchsorted(node_sorted, cells[block])
         if not comm.bcast(unique if comm.rank == 0 else None, root=0):
             raise ValueError("XDMF writer: a node or cell is owned by two ranks (keys not unique)")
         lay.counts = comm.bcast(lay.counts, root=0)
@@ -554,8 +679,8 @@ class XDMFSeries:
         path = self.data_dir / f"{self.prefix}mesh.h5"
         tmp = self.data_dir / f".{self.prefix}mesh.h5.tmp"
         with h5py.File(tmp, "w") as h5:
-            h5.create_dataset("geometry", data=self.points.astype("<f8"))
-            h5.create_dataset("topology", data=self.cells.astype("<i8"))
+            h5.create_dataset("geometry", data=self.points.astype("<f8", copy=False))
+            h5.create_dataset("topology", data=self.cells.astype("<i8", copy=False))
         os.replace(tmp, path)
 
     def _continue(self, keep_until: float) -> None:
@@ -594,9 +719,8 @@ class XDMFSeries:
         if self.closed:
             raise RuntimeError("write() after close()")
         parts = []
-        for f in self.fields:
+        for f, n in zip(self.fields, self._local):
             v = np.asarray(values[f.name])
-            n = self.layout.local[f.center]
             if v.size != n * f.ncomp:
                 raise ValueError(f"field {f.name}: {v.shape} values for {n} rows of {f.ncomp} components")
             parts.append(v.astype(self.dtype, copy=False).ravel())
@@ -683,8 +807,9 @@ class XDMFSeries:
         chunk, self.chunk = self.chunk, None
         if chunk is None:
             return
-        if not chunk.grids:  # its first level failed: nothing to write
+        if not chunk.grids:  # its first level failed: nothing to list
             chunk.drop()
+            _remove(chunk.path)
             return
         try:
             _close_chunk(chunk)

@@ -83,3 +83,40 @@ def test_no_contact_fields_without_contact(comm, shared_tmp):
         assert not (shared_tmp / "contact.csv").exists()
         assert set(read_results(shared_tmp)["fields"]) == {"displacement"}
         assert "peak_pressure" not in read_csv(shared_tmp / "timeseries.csv")[0]
+
+
+def test_profile_lines_are_each_values_repr_whether_the_gap_stays_or_moves(tmp_path):
+    """contact.csv's lines are the reprs of the values, whatever the writer keeps formatted (s and the point, and the
+    gap once it repeats): a gap that stays, one that moves every level, one that moves and stops, a part whose name
+    holds a %, and a point that moves."""
+    from mpi4py import MPI
+
+    from solver.io.contact_profile import ProfileWriter
+    from solver.io.layout import PROFILE_COLUMNS
+
+    rng = np.random.default_rng(3)
+    head = np.column_stack([np.linspace(0.0, 1.0, 5), rng.random((5, 3))])
+    gaps = [rng.random(5)] * 3 + [rng.random(5) for _ in range(3)] + [np.full(5, 0.1)] * 3
+
+    class Traces:
+        level = 0
+
+        def profile(self):
+            g = gaps[self.level]
+            other = np.column_stack([head[:, :1], head[:, 1:] + (self.level == 8)])  # the point moves at level 8
+            return [(name, np.column_stack([other if name == "top" else head, g, rng.standard_normal((5, 3))]))
+                    for name in ("bottom", "100%", "top")]
+
+    traces = Traces()
+    writer = ProfileWriter(tmp_path / "contact.csv", MPI.COMM_SELF, traces)
+    want = [",".join(PROFILE_COLUMNS) + "\n"]
+    for level in range(len(gaps)):
+        traces.level = level
+        state = rng.bit_generator.state
+        expected = traces.profile()
+        rng.bit_generator.state = state  # the writer's call draws the same values
+        writer.write(level, 0.1 * level)
+        want += [f"{level},{0.1 * level!r},{name}," + ",".join(map(repr, row)) + "\n"
+                 for name, rows in expected for row in rows.tolist()]
+    writer.close()
+    assert (tmp_path / "contact.csv").read_text() == "".join(want)

@@ -419,3 +419,26 @@ def test_vector3_of_no_rows():
     assert vector3(np.zeros((0, 2))).shape == (0, 3)
     assert vector3(np.zeros((0, 3))).shape == (0, 3)
     assert np.array_equal(vector3(np.ones((2, 2))), [[1, 1, 0], [1, 1, 0]])
+
+
+@pytest.mark.serial
+def test_large_levels_written_field_by_field_give_the_same_files(tmp_path, monkeypatch):
+    """A level's part of a chunk file is assembled in memory up to STAGE_BYTES and written at once, a larger one field
+    by field: both ways, and chunks closed full, by a flush and at the end, give the same files, byte for byte."""
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
+    scene = Scene(MPI.COMM_SELF, n=3)
+    times = [0.25 * i for i in range(8)]
+    for stage, name in ((sx.STAGE_BYTES, "staged"), (0, "by_field")):
+        monkeypatch.setattr(sx, "STAGE_BYTES", stage)
+        w = scene.series(tmp_path / name)
+        for i, t in enumerate(times):
+            w.write(t, scene.values(t))
+            if i == 4:
+                w.flush()  # chunk 3-4 closed early: written again as a 2-level file
+        w.close()
+        check_values(read_series(tmp_path / name / "solution.xdmf"), times)
+    files = sorted(p.name for p in (tmp_path / "staged" / "fields").iterdir())
+    assert files == ["levels_000000.h5", "levels_000003.h5", "levels_000005.h5", "mesh.h5"]
+    assert files == sorted(p.name for p in (tmp_path / "by_field" / "fields").iterdir())
+    for f in files:
+        assert (tmp_path / "staged" / "fields" / f).read_bytes() == (tmp_path / "by_field" / "fields" / f).read_bytes()
