@@ -28,6 +28,8 @@ export OMPI_ALLOW_RUN_AS_ROOT := 1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMPI_MCA_rmaps_base_oversubscribe := 1
 MPIRUN := mpirun -n 2
+# the one-process leg of `make test` runs its test modules on this many pytest-xdist workers (each module on one worker)
+TEST_WORKERS ?= 2
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: install system-packages demo test test-serial test-mpi test-portable check-slurm lint layers docs clean
@@ -62,7 +64,7 @@ demo: install
 	$(PY) -m solver run configs/example1.toml --output results/example1 --overwrite
 
 test: install layers
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadscope
 	$(MPIRUN) $(PY) -m pytest -q -m "not serial" -p no:cacheprovider
 	bash scripts/check-install.sh
 

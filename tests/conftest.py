@@ -9,10 +9,28 @@ import subprocess
 import sys
 from pathlib import Path
 
-import faults
-import numpy as np
-import pytest
-from mpi4py import MPI
+
+def _scrub_inherited_mpi_environment() -> None:
+    """pytest-xdist's workers (``make test`` runs them) are started by a process whose MPI is already initialised as a
+    singleton, which exports its launch variables (OMPI_MCA_ess=singleton, PMIX_NAMESPACE, ...): inherited, they make
+    every ``mpirun`` a test starts fail at once with no message. The controller records the OMPI_/PMIX_ variables the
+    user had; a worker drops the others before its own MPI starts."""
+    mine = [k for k in os.environ if k.startswith(("OMPI_", "PMIX_"))]
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        os.environ.setdefault("CAMPO_TEST_MPI_VARIABLES", ",".join(mine))
+        return
+    kept = set(os.environ.get("CAMPO_TEST_MPI_VARIABLES", "").split(","))
+    for key in mine:
+        if key not in kept:
+            del os.environ[key]
+
+
+_scrub_inherited_mpi_environment()
+
+import faults  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from mpi4py import MPI  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
