@@ -81,7 +81,7 @@ class EnergyNewtonSolver(DisplacementMethod):
 
     def scalars(self) -> dict[str, float]:
         """The linear solver's switch (NewtonCore.scalars)."""
-        return self.core.scalars() if self.retry_direct else {}
+        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         if self.retry_direct:

@@ -188,6 +188,7 @@ class NewtonCore:
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
         self.iterative = linear.iterative
+        self.switchable = linear.iterative  # whether :meth:`use_direct` can replace the linear solver
         contact = problem.contact
         self.cycles = ActiveSetCycleWatch(contact.comm if contact else comm,
                                           has_energy(problem) and contact.piecewise_linear)
@@ -398,7 +399,7 @@ class NewtonSolver(DisplacementMethod):
 
     def scalars(self) -> dict[str, float]:
         """The linear solver's switch (NewtonCore.scalars)."""
-        return self.core.scalars() if self.retry_direct else {}
+        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         if self.retry_direct:
