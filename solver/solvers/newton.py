@@ -209,7 +209,8 @@ class NewtonCore:
         self.snes = make_snes(comm, self.options.prefix, problem, settings, self._residual, self._jacobian, self.test)
 
     def use_direct(self) -> None:
-        """From now on, solve J by MUMPS's Cholesky (LU if J is not symmetric; the direct solver auto picks for a
+        """From now on (until :meth:`use_iterative`; :meth:`begin_level` calls it after DIRECT_LEVELS levels), solve J
+        by MUMPS's Cholesky (LU if J is not symmetric; the direct solver auto picks for a
         3-D run below linear.AUTO_ITERATIVE_DOFS_3D dofs) instead of the iterative solver: the SNES gets a new KSP
         with options of its own (the scene's ``mech_`` options are the iterative solver's and are not applied).
         What auto does where CG + GAMG fails on a stiff contact Jacobian (docs/model.md §4). Collective."""
