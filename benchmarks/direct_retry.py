@@ -20,6 +20,7 @@ import argparse
 import csv
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -104,7 +105,7 @@ def main() -> int:
     ratios = sorted(y["seconds"] / x["seconds"] for x, y in zip(rows[0::2], rows[1::2]))
     diff = max(abs(p - q) / abs(p) for x, y in zip(rows[0::2], rows[1::2])
                for p, q in zip(x["contact_force"], y["contact_force"]))
-    print(f"{b} / {a} time: median {ratios[len(ratios) // 2]:.3f}, range {ratios[0]:.3f}-{ratios[-1]:.3f}; "
+    print(f"{b} / {a} time: median {statistics.median(ratios):.3f}, range {ratios[0]:.3f}-{ratios[-1]:.3f}; "
           f"contact forces differ by at most {diff:.2e} relative")
     return 0
 
