@@ -26,6 +26,7 @@ docs/model.md §4).
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 
 from solver.errors import DisplacementSolveError
@@ -40,6 +41,8 @@ NEWTON_ITERATIONS = 8
 # ... and the number of iterations in a row, each raising ||F||, after which it hands the level over at once
 GROWTH_STEPS = 2
 
+log = logging.getLogger("solver")
+
 
 class AutoSolver(DisplacementMethod):
     """``newton``'s levels until one fails, then ``takeover``'s (module docstring). ``newton`` is built with at
@@ -52,6 +55,8 @@ class AutoSolver(DisplacementMethod):
         self.switched_at: int | None = None  # the level (count of levels solved before it) it switched at
         self.levels = 0
         self._start = newton.problem.u.vector.duplicate() if takeover is not None else None
+        if takeover is not None:  # auto's own retry on the direct solver (solve), not each method's
+            newton.retry_direct = takeover.retry_direct = False
 
     @property
     def switched(self) -> bool:
@@ -64,15 +69,25 @@ class AutoSolver(DisplacementMethod):
     def solve(self, scale: float) -> SolveInfo:
         """The level by Newton, or (from the first level Newton fails) by the take-over method."""
         self.levels += 1
-        if self.switched:
-            return self.takeover.solve(scale)
         if self.takeover is None:
             return self.newton.solve(scale)
         u, core = self.newton.problem.u, self.newton.core
         # a first contact after the run's first level goes to the take-over's own path (module docstring)
         self.newton.take_path = not (self.takeover.has_path and self.levels > 1)
+        core.begin_level()  # back to the iterative solver after the levels the direct one took (NewtonCore)
         u.vector.copy(self._start)
         f0 = core.factorizations
+        if self.switched:
+            try:
+                return self.takeover.solve(scale)
+            except DisplacementSolveError as exc:
+                if not self._direct_if_linear_failed(exc):
+                    raise
+                self._start.copy(u.vector)  # the level again from its start, solved directly
+                u.x.scatter_forward()
+                info = self.takeover.solve(scale)
+                return replace(info, iterations=info.iterations + exc.iterations,
+                               linear_solves=info.linear_solves + exc.iterations, factorizations=core.factorizations - f0)
         core.test.growth_limit = GROWTH_STEPS
         try:
             return self.newton.solve(scale)
@@ -113,6 +128,7 @@ class AutoSolver(DisplacementMethod):
         """Put the core on the direct solver where ``exc`` is a failed iterative linear solve; whether it did."""
         if exc.linear_reason >= 0 or not self.core.iterative:
             return False
+        log.info("the iterative linear solver failed: the level is solved again by MUMPS's direct solver")
         self.core.use_direct()
         return True
 
@@ -142,7 +158,7 @@ class AutoSolver(DisplacementMethod):
         """What a checkpoint carries of the switch: the level it was made at (-1: not yet), and whether the
         iterative linear solver was replaced by the direct one (:meth:`NewtonCore.use_direct`)."""
         return {"switched_at": float(-1 if self.switched_at is None else self.switched_at),
-                "levels": float(self.levels), "direct": float(self.core.direct_switches)}
+                "levels": float(self.levels), **self.core.scalars()}
 
     def restore_scalars(self, scalars: dict[str, float]) -> None:
         """Take back :meth:`scalars`: a restarted run goes on with the method the checkpointed one had."""
@@ -150,5 +166,4 @@ class AutoSolver(DisplacementMethod):
         self.levels = int(scalars.get("levels", 0))
         if at >= 0:
             self.switched_at = at
-        if scalars.get("direct", 0.0) > 0:
-            self.core.use_direct()
+        self.core.restore_scalars(scalars)

@@ -59,6 +59,8 @@ class EnergyNewtonSolver(DisplacementMethod):
         self._seen: list[bytes] = []  # the active sets of the level's iterates
         self._at_trial = False  # x is the last trial point, where J and the active set were assembled
         self.damped_steps = 0  # steps shorter than the Newton step, over the run
+        self.retry_direct = True  # a failed iterative linear solve: the level again, directly (solve)
+        self._start: PETSc.Vec | None = None
 
     @property
     def _work(self) -> list:
@@ -67,7 +69,25 @@ class EnergyNewtonSolver(DisplacementMethod):
         return self._vectors
 
     def solve(self, scale: float) -> SolveInfo:
-        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
+        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError. Where the
+        iterative linear solve fails, the level again on the direct solver (NewtonCore.solve_level), unless
+        ``retry_direct`` is off (auto's take-over: auto retries itself)."""
+        if not (self.retry_direct and (self.core.iterative or self.core.on_direct)):
+            return self._solve(scale)
+        if self._start is None:
+            self._start = self.problem.u.vector.duplicate()
+        self.problem.u.vector.copy(self._start)
+        return self.core.solve_level(lambda: self._solve(scale), self._start)
+
+    def scalars(self) -> dict[str, float]:
+        """The linear solver's switch (NewtonCore.scalars)."""
+        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        if self.retry_direct:
+            self.core.restore_scalars(scalars)
+
+    def _solve(self, scale: float) -> SolveInfo:
         core = self.core
         self.test.start_level(scale)
         ksp = core.ksp

@@ -16,7 +16,9 @@ callbacks, the counters, a level's outcome); :class:`NewtonSolver` runs a level 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 from dolfinx.fem import petsc as fpetsc
@@ -30,6 +32,7 @@ from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, Complianc
 from solver.solvers.cycle_watch import CONVERGED_SET, CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
 from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
+    REASONS_KSP,
     REASONS_SNES,
     KrylovTolerance,
     OwnOptions,
@@ -51,6 +54,13 @@ STIFF_CONTACT_RATIO = 100.0
 # further step did not lower it; on column3d.toml's first level one direct solve left 1.9e-9 (100 rtol * scale
 # accepted it), where the next step reached 1e-15 and moved the contact pressure by 7e-8 relative (docs/model.md §4)
 SET_FLOOR = 10.0
+# after a failed iterative linear solve put the core on the direct solver (NewtonCore.use_direct), the levels it
+# solves there before the iterative solver has the next one again; None: the rest of the run. None: going back
+# after 1 level was 1.06 times as slow on the 3-D sphere (27,537 dofs), whose next level failed GAMG again
+# (docs/model.md §4)
+DIRECT_LEVELS: int | None = None
+
+log = logging.getLogger("solver")
 
 
 def contact_normals(problem: DisplacementProblem) -> np.ndarray:
@@ -172,10 +182,15 @@ class NewtonCore:
         self.problem, self.settings = problem, settings
         self.factorizations = 0  # factorizations (direct) or preconditioner set-ups (iterative)
         self.krylov_iterations = 0  # summed over the run (iterative solves)
-        self.direct_switches = 0  # 1 once :meth:`use_direct` has replaced the iterative solver
+        self.direct_switches = 0  # times :meth:`use_direct` has replaced the iterative solver
+        self.direct_levels = 0  # levels the direct solver has solved since it replaced the iterative one
+        self._direct_ksp: PETSc.KSP | None = None  # the direct solver's KSP, made at the first switch
+        self._iterative_ksp: PETSc.KSP | None = None  # the iterative one while the direct one solves
+        self._krylov_applies = False
         self._initial: PETSc.Vec | None = None  # the first residual of a solve, computed before SNES starts
         self._F0 = problem.r.duplicate()
         self.iterative = linear.iterative
+        self.switchable = linear.iterative  # whether :meth:`use_direct` can replace the linear solver
         contact = problem.contact
         self.cycles = ActiveSetCycleWatch(contact.comm if contact else comm,
                                           has_energy(problem) and contact.piecewise_linear)
@@ -196,24 +211,86 @@ class NewtonCore:
         self.snes = make_snes(comm, self.options.prefix, problem, settings, self._residual, self._jacobian, self.test)
 
     def use_direct(self) -> None:
-        """From now on, solve J by MUMPS's Cholesky (LU if J is not symmetric; the direct solver auto picks for a
+        """From now on (until :meth:`use_iterative`; :meth:`begin_level` calls it after DIRECT_LEVELS levels), solve J
+        by MUMPS's Cholesky (LU if J is not symmetric; the direct solver auto picks for a
         3-D run below linear.AUTO_ITERATIVE_DOFS_3D dofs) instead of the iterative solver: the SNES gets a new KSP
         with options of its own (the scene's ``mech_`` options are the iterative solver's and are not applied).
         What auto does where CG + GAMG fails on a stiff contact Jacobian (docs/model.md §4). Collective."""
         if not self.iterative:
             return
-        comm = self.problem.u.function_space.mesh.comm
-        ksp = PETSc.KSP().create(comm)
-        # the options live with the core (not the Python wrapper of the KSP): MUMPS reads mat_mumps_* when it factors
-        self._direct_options = OwnOptions(self, self.prefix + "direct_",
-                                          direct_options(comm, "mumps", self.problem.symmetric), ())
-        ksp.setOptionsPrefix(self._direct_options.prefix)
-        ksp.setOperators(self.problem.J, self.problem.J)
-        ksp.setFromOptions()
-        self.snes.setKSP(ksp)
+        if self._direct_ksp is None:
+            comm = self.problem.u.function_space.mesh.comm
+            ksp = PETSc.KSP().create(comm)
+            # the options live with the core (not the Python wrapper of the KSP): MUMPS reads mat_mumps_* when it
+            # factors
+            self._direct_options = OwnOptions(self, self.prefix + "direct_",
+                                              direct_options(comm, "mumps", self.problem.symmetric), ())
+            ksp.setOptionsPrefix(self._direct_options.prefix)
+            ksp.setOperators(self.problem.J, self.problem.J)
+            ksp.setFromOptions()
+            self._direct_ksp = ksp
+        self._iterative_ksp = self.snes.getKSP()  # kept, with its options, for :meth:`use_iterative`
+        self.snes.setKSP(self._direct_ksp)
         self.iterative = False
-        self.krylov_tolerance.applies = False
+        self._krylov_applies, self.krylov_tolerance.applies = self.krylov_tolerance.applies, False
         self.direct_switches += 1
+        self.direct_levels = 0
+
+    def use_iterative(self) -> None:
+        """Back to the iterative solver :meth:`use_direct` replaced (nothing where it did not). Collective."""
+        if self._iterative_ksp is None or self.iterative:
+            return
+        self._iterative_ksp.setOperators(self.problem.J, self.problem.J)
+        self.snes.setKSP(self._iterative_ksp)
+        self.iterative = True
+        self.krylov_tolerance.applies = self._krylov_applies
+
+    @property
+    def on_direct(self) -> bool:
+        """Whether :meth:`use_direct` has replaced the iterative solver (and :meth:`use_iterative` not undone it)."""
+        return self._iterative_ksp is not None and not self.iterative
+
+    def begin_level(self) -> None:
+        """A level begins: back to the iterative solver where the direct one has solved DIRECT_LEVELS levels
+        since a failed Krylov solve put the core on it."""
+        if self.on_direct and DIRECT_LEVELS is not None and self.direct_levels >= DIRECT_LEVELS:
+            self.use_iterative()
+
+    def solve_level(self, solve: Callable[[], SolveInfo], start: PETSc.Vec) -> SolveInfo:
+        """``solve()`` (a method's level from u, which ``start`` holds), and where its iterative linear solve
+        fails, the level again from ``start`` on the direct solver (:meth:`use_direct`), one line in the log
+        saying so: what ``newton`` and ``newton_energy`` do where CG + GAMG fails on a stiff contact Jacobian."""
+        self.begin_level()
+        f0 = self.factorizations
+        try:
+            return solve()
+        except DisplacementSolveError as exc:
+            if exc.linear_reason >= 0 or not self.iterative:
+                raise
+            failed = exc
+        log.info("the iterative linear solver failed (%s, Newton iteration %d): the level is solved again by "
+                 "MUMPS's direct solver (%s)", REASONS_KSP.get(failed.linear_reason, failed.linear_reason),
+                 failed.iterations, "for the rest of the run" if DIRECT_LEVELS is None else
+                 f"the iterative one again after {DIRECT_LEVELS} level{'s' if DIRECT_LEVELS > 1 else ''}")
+        self.use_direct()
+        u = self.problem.u
+        start.copy(u.vector)
+        u.x.scatter_forward()
+        info = solve()
+        return replace(info, iterations=info.iterations + failed.iterations,
+                       linear_solves=info.linear_solves + failed.iterations,
+                       factorizations=self.factorizations - f0)
+
+    def scalars(self) -> dict[str, float]:
+        """What a checkpoint carries of the linear solver: whether the direct one solves (after a failed Krylov
+        solve) and the levels it has solved since."""
+        return {"direct": float(self.on_direct), "direct_levels": float(self.direct_levels)}
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        """Take back :meth:`scalars`: a restarted run goes on with the linear solver the checkpointed one had."""
+        if scalars.get("direct", 0.0) > 0:
+            self.use_direct()
+            self.direct_levels = int(scalars.get("direct_levels", 0))
 
     def count_factorizations(self, n: int) -> None:
         """Count ``n`` factorizations (set-ups) made by a method's own iteration on the core's KSP or beside it."""
@@ -284,6 +361,8 @@ class NewtonCore:
             # one exact (direct) solve of a linear problem: the residual must meet the tolerance
             ok = residual <= tol
         problem.level_converged() if ok else problem.forget_level()
+        if ok and self.on_direct:
+            self.direct_levels += 1
         if not ok:
             raise DisplacementSolveError("SNES", name, its, list(history), tol, linear_reason=ksp_reason)
         return SolveInfo(max(its, 1), factorizations, residual, name, linear_solves=max(its, 1),
@@ -304,6 +383,11 @@ class NewtonSolver(DisplacementMethod):
         self._path_end = core.problem.u.vector.duplicate() if self.continuation is not None else None
         self.take_path = True  # False: a first contact Newton's FIRST_STEPS do not solve fails there (auto.py sets it)
 
+        # a level whose iterative linear solve fails is solved again on the direct solver (NewtonCore.solve_level);
+        # auto, which has its own retry, turns it off
+        self.retry_direct = True
+        self._start: PETSc.Vec | None = None
+
     @property
     def fallbacks(self) -> int:
         """Levels solved by the damped fallback."""
@@ -311,6 +395,22 @@ class NewtonSolver(DisplacementMethod):
 
     def solve(self, scale: float) -> SolveInfo:
         """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
+        if not (self.retry_direct and (self.core.iterative or self.core.on_direct)):
+            return self._solve(scale)
+        if self._start is None:
+            self._start = self.problem.u.vector.duplicate()
+        self.problem.u.vector.copy(self._start)
+        return self.core.solve_level(lambda: self._solve(scale), self._start)
+
+    def scalars(self) -> dict[str, float]:
+        """The linear solver's switch (NewtonCore.scalars)."""
+        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        if self.retry_direct:
+            self.core.restore_scalars(scalars)
+
+    def _solve(self, scale: float) -> SolveInfo:
         core = self.core
         core.test.start_level(scale)
         core.krylov_tolerance.apply(core.ksp, scale)

@@ -6,6 +6,7 @@ import pytest
 from conftest import ROOT, checkpointed
 from petsc4py import PETSc
 
+import solver.solvers.newton as newton_module
 from solver.config import load
 from solver.io import checkpoint
 from solver.io.results import run
@@ -181,7 +182,8 @@ def test_the_level_handed_over_gets_the_fallback_budget():
             other.tag = self.tag
 
     u = SimpleNamespace(vector=Vec("level start"), x=SimpleNamespace(scatter_forward=lambda: None))
-    core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None), iterative=False)
+    core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None), iterative=False,
+                           begin_level=lambda: None)
     core.use_direct = lambda: setattr(core, "iterative", False)
 
     class FailingNewton:
@@ -246,30 +248,91 @@ def test_the_level_handed_over_gets_the_fallback_budget():
     assert calls == ["path's end", "path's end"] and not core.iterative and info.iterations == 8 + 4 + 5
 
 
-def test_a_failed_iterative_linear_solve_is_solved_again_directly(comm):
+RETRY = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "time.T=0.3", "output.xdmf=false"]
+FAILING_KRYLOV = ["solver.linear='iterative'", "solver.petsc_options.mech_ksp_max_it=1"]
+
+
+@pytest.mark.parametrize("direct_levels", [None, 1])
+def test_a_failed_iterative_linear_solve_is_solved_again_directly(comm, direct_levels, monkeypatch):
     """CG + AMG stopped after one iteration (mech_ksp_max_it = 1) fails Newton's first linear solve: auto puts the
     core on the direct solver and hands the level over, which it then solves; the levels match a direct run's to
-    round-off (the direct run's Newton solves them all)."""
-    extra = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "time.T=0.3", "output.xdmf=false"]
-    model, rows = _run(comm, "auto", [*extra, "solver.linear='iterative'", "solver.petsc_options.mech_ksp_max_it=1"],
-                       "example1.toml")
+    round-off (the direct run's Newton solves them all). With DIRECT_LEVELS = 1 each later level goes back to CG +
+    AMG, fails again and is solved directly again (one switch a level); with None the core stays direct."""
+    monkeypatch.setattr(newton_module, "DIRECT_LEVELS", direct_levels)
+    model, rows = _run(comm, "auto", [*RETRY, *FAILING_KRYLOV], "example1.toml")
     solver = model.mech.solver
-    assert solver.switched_at == 0 and solver.core.direct_switches == 1 and not solver.core.iterative
-    ref_model, ref = _run(comm, "auto", [*extra, "solver.linear='mumps'"], "example1.toml")
+    assert solver.switched_at == 0 and not solver.core.iterative
+    assert solver.core.direct_switches == (1 if direct_levels is None else len(rows))
+    ref_model, ref = _run(comm, "auto", [*RETRY, "solver.linear='mumps'"], "example1.toml")
     assert not ref_model.mech.solver.switched
     for key in ("contact_force", "strain_norm"):
         assert [r[key] for r in rows] == pytest.approx([r[key] for r in ref], rel=1e-10), key
     assert model.u.vector.norm() == pytest.approx(ref_model.u.vector.norm(), rel=1e-10)
-    # a checkpoint carries the switch: a model restored from these scalars solves directly from the start
+    # a checkpoint carries the switch: a model restored from these scalars solves directly from the start, and goes
+    # back to the iterative solver at the level where the checkpointed run would
     fresh = build_model(load(ROOT / "configs" / "example1.toml",
-                             [*extra, "solver.linear='iterative'", "solver.method='auto'"]), comm)
+                             [*RETRY, "solver.linear='iterative'", "solver.method='auto'"]), comm)
     assert fresh.mech.solver.core.iterative
     fresh.mech.restore_scalars(model.mech.scalars())
     assert not fresh.mech.solver.core.iterative and fresh.mech.solver.core.ksp.getType() == "preonly"
+    fresh.mech.solver.core.begin_level()
+    assert fresh.mech.solver.core.iterative == (direct_levels is not None)
+
+
+def test_a_restart_after_the_switch_takes_the_same_levels(comm, shared_tmp, monkeypatch):
+    """A run restarted from a checkpoint written on the direct solver (after level 1: DIRECT_LEVELS = 1 sends it
+    back to CG + AMG at level 2) takes the same iterations, factorizations and solution as the run it continues."""
+    monkeypatch.setattr(newton_module, "DIRECT_LEVELS", 1)
+    cfg = load(ROOT / "configs" / "example1.toml", [*RETRY, *FAILING_KRYLOV, "solver.method='auto'"])
+    model, stepper, fresh = checkpointed(cfg, comm, shared_tmp, 2)
+    assert not model.mech.solver.core.iterative and model.mech.solver.core.direct_levels == 1
+    checkpoint.read(shared_tmp, fresh)
+    again = Stepper(fresh)
+    for n in range(2, 4):
+        a, b = stepper.step(n), again.step(n)
+        assert a["newton_iterations"] == b["newton_iterations"] and a["factorizations"] == b["factorizations"] - (
+            1 if n == 2 else 0), n  # the restarted process sets its solver up once more, at its first level
+        assert a["contact_force"] == pytest.approx(b["contact_force"], rel=1e-12), n
+        assert fresh.u.vector.norm() == pytest.approx(model.u.vector.norm(), rel=1e-12), n
+        assert fresh.mech.solver.core.iterative == model.mech.solver.core.iterative, n
+
+
+@pytest.mark.parametrize("direct_levels", [1, 2])
+def test_after_the_levels_on_the_direct_solver_it_is_iterative_again(comm, direct_levels, monkeypatch):
+    """Where CG + AMG can solve the levels, a core put on the direct solver (as a failed Krylov solve puts it) solves
+    DIRECT_LEVELS levels there and the next ones iteratively, to the same solution as a run that stayed
+    iterative."""
+    monkeypatch.setattr(newton_module, "DIRECT_LEVELS", direct_levels)
+    model = build_model(load(ROOT / "configs" / "example1.toml", [*RETRY, "solver.linear='iterative'"]), comm)
+    core = model.mech.solver.core
+    core.use_direct()
+    stepper = Stepper(model)
+    rows = [stepper.step(n) for n in range(4)]
+    assert core.iterative and core.direct_switches == 1
+    assert all(r["krylov_iterations"] == 0 for r in rows[:direct_levels])
+    assert all(r["krylov_iterations"] > 0 for r in rows[direct_levels:])
+    _, ref = _run(comm, "auto", [*RETRY, "solver.linear='iterative'"], "example1.toml")
+    for key in ("contact_force", "strain_norm"):
+        assert [r[key] for r in rows] == pytest.approx([r[key] for r in ref], rel=1e-10), key
+
+
+@pytest.mark.parametrize("method", ["newton", "newton_energy"])
+def test_newton_too_solves_a_level_again_directly(comm, method, caplog):
+    """newton and newton_energy, where CG + AMG fails (mech_ksp_max_it = 1), solve the level again on the direct
+    solver, saying so in one line of the log, to a MUMPS run's results (to 1e-10)."""
+    import logging
+
+    with caplog.at_level(logging.INFO, logger="solver"):
+        model, rows = _run(comm, method, [*RETRY, *FAILING_KRYLOV], "example1.toml")
+    assert model.mech.solver.core.direct_switches >= 1
+    lines = [r for r in caplog.records if "iterative linear solver failed" in r.getMessage()]
+    assert len(lines) == model.mech.solver.core.direct_switches and "MUMPS" in lines[0].getMessage()
+    _, ref = _run(comm, method, [*RETRY, "solver.linear='mumps'"], "example1.toml")
+    for key in ("contact_force", "strain_norm"):
+        assert [r[key] for r in rows] == pytest.approx([r[key] for r in ref], rel=1e-10), key
 
 
 def test_where_the_iterative_solves_succeed_it_stays_iterative(comm):
     """The same scene with CG + AMG's own limits: no linear solve fails, no switch to the direct solver."""
-    extra = ["mesh.nx=8", "mesh.ny=8", "time.k=0.1", "time.T=0.3", "output.xdmf=false"]
-    model, _ = _run(comm, "auto", [*extra, "solver.linear='iterative'"], "example1.toml")
+    model, _ = _run(comm, "auto", [*RETRY, "solver.linear='iterative'"], "example1.toml")
     assert model.mech.solver.core.direct_switches == 0 and model.mech.solver.core.iterative

@@ -104,7 +104,7 @@ def test_what_a_checkpoint_carries_is_declared(comm):
     assert set(_model(comm, "newton").mech.scalars()) == {"c_norm", "reuse"}
     auto = _model(comm, "auto").mech
     assert set(auto.state()) == {"F_last", "b", "predictor"}
-    assert set(auto.scalars()) == {"c_norm", "reuse", "switched_at", "levels", "direct"}
+    assert set(auto.scalars()) == {"c_norm", "reuse", "switched_at", "levels", "direct", "direct_levels"}
 
 
 def test_a_method_built_where_it_does_not_apply_is_refused(comm):
