@@ -506,9 +506,10 @@ class _Chunk:
         fd = None
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-            for slot in range(n):
-                for offset, data in part.meta[slot]:
+            for meta in part.meta:  # per part of the file (a part may hold several slots)
+                for offset, data in meta:
                     _pwrite(fd, data, offset, tmp)
+            for slot in range(n):
                 for name, (offset, count) in part.where[slot].items():
                     if count:
                         _pwrite(fd, os.pread(self.fd, count * full.dtype.itemsize, full.where[slot][name][0]), offset,

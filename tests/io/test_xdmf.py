@@ -442,3 +442,19 @@ def test_large_levels_written_field_by_field_give_the_same_files(tmp_path, monke
     assert files == sorted(p.name for p in (tmp_path / "by_field" / "fields").iterdir())
     for f in files:
         assert (tmp_path / "staged" / "fields" / f).read_bytes() == (tmp_path / "by_field" / "fields" / f).read_bytes()
+
+
+@pytest.mark.serial
+def test_a_chunk_closed_early_whose_small_levels_share_parts_is_written_again_whole(tmp_path, monkeypatch):
+    """Small levels: HDF5 groups several levels' datasets in one part of the file, so a chunk closed before it is full
+    has fewer parts than levels; the file of its levels is still complete (every level reads back)."""
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 40)
+    scene = Scene(MPI.COMM_SELF, n=2)
+    times = [0.1 * i for i in range(25)]
+    w = scene.series(tmp_path)
+    for t in times:
+        w.write(t, scene.values(t))
+    w.close()
+    assert len(w._template(25).cut) - 1 < 25  # the case: fewer parts than levels
+    check_values(read_series(tmp_path / "solution.xdmf"), times)
+    check_values(meshio_read(tmp_path / "solution.xdmf"), times)
