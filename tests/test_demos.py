@@ -25,7 +25,7 @@ def test_every_demo_is_listed():
 @pytest.mark.parametrize("demo", DEMOS, ids=lambda p: p.stem)
 def test_demo_runs(demo, tmp_path):
     env = dict(mpi_env(), DEMO_OUTPUT=str(tmp_path), PYTHONPATH=str(ROOT), MPLBACKEND="Agg", **DEMO_ENV.get(demo.stem, {}))
-    res = subprocess.run([sys.executable, str(demo)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    res = subprocess.run([sys.executable, str(demo)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     for name in CHARTS[demo.stem]:
         assert (tmp_path / name).is_file(), name

@@ -50,6 +50,25 @@ GRID = 8  # steps are T 2^(j/GRID): a round-off in an estimate (another partitio
 SHARE = 0.7  # of the tolerance, for the sum of the steps' errors (each at most (SHARE tol / S)^2, see _ratio)
 
 
+def lumped_mass(V: fem.FunctionSpace) -> np.ndarray:
+    """The owned nodes' lumped masses: P1, the row sums (1, xi_i); higher degrees, the consistent mass matrix's
+    diagonal scaled to the domain's measure (Hinton-Rock-Zienkiewicz), positive where P2's row sums vanish (triangles'
+    vertices) or are negative (tetrahedra's)."""
+    xi = ufl.TestFunction(V)
+    n = V.dofmap.index_map.size_local
+    if V.ufl_element().degree() == 1:
+        mass = fem.petsc.assemble_vector(fem.form(xi * ufl.dx))
+        mass.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return mass.array_r[:n].copy()
+    M = fem.petsc.assemble_matrix(fem.form(ufl.TrialFunction(V) * xi * ufl.dx))
+    M.assemble()
+    diag = M.getDiagonal().array_r[:n].copy()
+    M.destroy()
+    comm = V.mesh.comm
+    measure = comm.allreduce(fem.assemble_scalar(fem.form(fem.Constant(V.mesh, 1.0) * ufl.dx)), op=MPI.SUM)
+    return diag * (measure / comm.allreduce(float(diag.sum()), op=MPI.SUM))
+
+
 def load_kinks(cfg: Config) -> list[float]:
     """The times in (0, T) of the rows of every load table (tractions, displacements, body force)."""
     tables = [b.traction for b in cfg.boundaries if b.role == "traction"]
@@ -214,7 +233,7 @@ class StepController:
             self._Ez = fem.Function(model.damage.V)
 
     def _damage_parts(self, model) -> None:
-        """phi at the nodes (lumped: (phi, xi) / (1, xi)), the nodes' masses."""
+        """phi at the nodes (lumped: (phi, xi) / m_i), the nodes' masses m_i (:func:`lumped_mass`)."""
         self.past_phi: list[np.ndarray] = []
         damage = model.damage
         if damage is None:
@@ -223,10 +242,8 @@ class StepController:
         xi = ufl.TestFunction(V)
         dx = ufl.dx(metadata={"quadrature_degree": model.cfg.solver.damage_quadrature_degree})
         self._fphi = fem.form(damage.law.ufl(strain(model.u), damage.zeta) * xi * dx)
-        mass = fem.petsc.assemble_vector(fem.form(xi * ufl.dx))
-        mass.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.nz = V.dofmap.index_map.size_local
-        self.mass = mass.array_r[: self.nz].copy()
+        self.mass = lumped_mass(V)
         self._bphi = fem.petsc.create_vector(self._fphi)
         self._phi = fem.Function(V)
         self.past_phi = [np.zeros_like(damage.zeta.x.array) for _ in range(self.p)]
