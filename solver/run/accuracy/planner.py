@@ -5,7 +5,9 @@ The error is bounded by a space part and a time part (``accuracy.space_share`` o
 space part, the rest the time part). In order:
 
 1. the step (:func:`time_error.choose_step`): step doubling on the start mesh with the lowest degree; the space
-   parts then get what its time error leaves of the tolerance;
+   parts then get what its time error leaves of the tolerance. With ``accuracy.time = "adaptive"``
+   (:func:`time_error.controller_step`) the run's step controller keeps the time error within the time's share
+   instead, and one pilot run replaces the three;
 2. the degree (:meth:`Planner._degree`): one solve per degree on the start mesh; the measured rates of adapted
    meshes extrapolate the dofs each needs, times its cost per dof (``constants``);
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
@@ -35,7 +37,7 @@ import numpy as np
 from mpi4py import MPI
 
 from solver.config import Config
-from solver.errors import ToleranceError
+from solver.errors import ConfigError, ToleranceError
 from solver.mesh.adapt import refine, refine_twice, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
@@ -47,7 +49,7 @@ from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
 from .solves import AtLargestLevel, AtLevel0, SpaceProbe, solve_level0
-from .time_error import StepChoice, choose_step, restep
+from .time_error import StepChoice, choose_step, controller_step, restep
 from .zeta import ZetaRuns, zeta_difference, zeta_space
 
 Log = Callable[[str], None]
@@ -71,6 +73,9 @@ CALIBRATE_RATIO = 128.0
 # the whole mesh) costs more than that (Example 1 at 1e-4: a round on 8,666 P2 cells about 1.4 s, a step of the run
 # about 0.2 s)
 STEPS_PER_ROUND = 4
+# the same for the run's step controller (accuracy.time = "adaptive"), whose steps are not known before the run: its
+# tolerance made smaller by at most the factor that adds this fraction of its steps (about STEPS_PER_ROUND of 40)
+MORE_STEPS_ADAPTIVE = 0.1
 # a Dörfler set of at most SMALL_SET of the cells (the estimate carried by a few cells at singular corners, near the
 # end of a 2-D sequence) is refined twice in one round (its children again): such a set's first refinement cut eta
 # only 1.2-1.6-fold each round on Example 1 (8,495 -> 8,569 -> 8,666 -> 8,742 P2 cells, one factorization of the
@@ -104,13 +109,30 @@ class Setup:
     started: float  # perf_counter at the start of planning
 
 
+def controller_degrees(scene: Config, log: Log) -> Config:
+    """The scene with ``accuracy.degrees`` the run's step controller can serve: with ``accuracy.time = "adaptive"``
+    and damage, degree 1 only (the controller's damage estimate divides by the lumped mass of zeta's space, whose
+    vertex entries are zero for P2 on triangles: it has no estimate there, and would not control the steps). A
+    ConfigError where that leaves no degree."""
+    acc = scene.accuracy
+    if acc.time != "adaptive" or not scene.damage.enabled or set(acc.degrees) <= {1}:
+        return scene
+    if 1 not in acc.degrees:
+        raise ConfigError(key="accuracy.time", value=acc.time, source=scene.source,
+                          allowed="with damage the step controller estimates degree 1 only, and accuracy.degrees = "
+                                  f"{list(acc.degrees)}: use accuracy.time = \"uniform\" or degree 1")
+    log("accuracy.time = adaptive: degree 1 only (the step controller has no damage estimate at degree 2)")
+    return with_changes(scene, {"accuracy": {"degrees": [1]}})
+
+
 def prepare(scene: Config, comm: MPI.Comm, log: Log) -> Setup:
     """The start mesh, the order, the constants, the absolute tolerance (a relative one times ||eps(u_0)||, one
     solve) and the dof limit. Collective."""
     started = time.perf_counter()
-    acc = scene.accuracy
-    if not acc.enabled:
+    if not scene.accuracy.enabled:
         raise ValueError("plan: the scene has no accuracy.tolerance")
+    scene = controller_degrees(scene, log)
+    acc = scene.accuracy
     cfg = with_changes(scene, {"output": {"xdmf": False}})
     start = start_mesh(cfg, comm)
     order = time_order(with_changes(cfg, start))
@@ -147,13 +169,15 @@ class Planner:
         s, acc = self.setup, self.acc
         pilot = with_changes(s.base, degrees(min(acc.degrees)))  # the time error hardly depends on the degree
         started = time.perf_counter()
-        chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
+        by = controller_step if acc.time == "adaptive" else choose_step
+        chosen = by(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
         self._time("step", started)
         self.stages["prepare"] = started - s.started
         self.chosen = chosen
         started = time.perf_counter()
+        # the controller's steps are not known before the run: the order's change at the pilot's step, unscaled
         changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
-                                chosen.k0, chosen.k)
+                                chosen.k0, chosen.k0 if chosen.adaptive else chosen.k)
         self._time("ingredients", started)
         if acc.simplify:
             changes, left_out = simplified(changes, s.tol)
@@ -188,9 +212,11 @@ class Planner:
         seconds = time.perf_counter() - s.started
         out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, self.C[degree], chosen.growth,
                    chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
-                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes), level0_u)
-        self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
-                 f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
+                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes), level0_u,
+                   adaptive=chosen.adaptive)
+        steps = (f"adaptive steps from k = {chosen.k:g}, time.tolerance = {chosen.error:.3e}" if chosen.adaptive
+                 else f"k = {chosen.k:g} ({round(s.base.time.T / chosen.k)} steps)")
+        self.log(f"chosen: P{degree} (u and zeta), order {s.order}, {steps}, {geo.num_cells()} cells; estimated error <= "
                  f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
                  f"TOL {s.tol:.3e}; planned in {seconds:.2f} s ("
                  + ", ".join(f"{k} {v:.2f}" for k, v in self.stages.items()) + ")")
@@ -305,11 +331,18 @@ class Planner:
                 return False
             T = run_k0.time.T
             smaller = restep(self.chosen, self.setup.tol - rec.estimate * G - zeta, T)
-            if smaller is None or round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
+            if smaller is None:
+                return False
+            if self.chosen.adaptive:  # the controller's steps grow as its tolerance^(-1/order)
+                if (self.chosen.error / smaller.error) ** (1.0 / smaller.rate) > 1.0 + MORE_STEPS_ADAPTIVE:
+                    return False
+            elif round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
                 return False
             if smaller is not self.chosen:
+                what = (f"time.tolerance = {smaller.error:.3e}" if smaller.adaptive
+                        else f"k = {smaller.k:g} ({round(T / smaller.k)} steps)")
                 self.log(f"  kept, {rec.estimate / (target if not found else (share - zeta) / G):.3f} times u's "
-                         f"target: k = {smaller.k:g} ({round(T / smaller.k)} steps) leaves it room")
+                         f"target: {what} leaves it room")
             self.chosen = smaller
             return True
 
