@@ -46,6 +46,27 @@ def reference(cfg, ref_tol: float):
     return ref
 
 
+def measure(ref, model, planning: float) -> dict:
+    """The run of ``model`` against ``ref`` (studies/tolerance.py's Reference.measure, which it follows) with its
+    steps and rejected trials counted."""
+    import numpy as np
+
+    from solver.run.stepper import levels
+    from studies.reference import PointwiseError
+
+    judge = PointwiseError(ref.model.u.function_space, ref.model.damage.V if ref.model.damage is not None else None,
+                           model)
+    errs, loop, steps, rejected = [], 0.0, 0, 0
+    for row in levels(model):
+        loop += row["wall_time"]
+        steps, rejected = row["step"], rejected + int(row.get("rejected", 0))
+        j = ref.level(row["t"])
+        if j is not None:
+            errs.append(sum(judge(ref.u[j], ref.zeta[j])))
+    return {"error": float(np.max(errs)), "levels": len(errs), "loop_seconds": loop, "cost": loop + planning,
+            "steps": steps, "rejected": rejected, "failure": None}
+
+
 def one(ref, cfg, tol: float, mode: str) -> dict:
     """Plan at ``tol`` with accuracy.time = ``mode`` and run it against ``ref``."""
     from solver.run.accuracy import plan
@@ -62,11 +83,10 @@ def one(ref, cfg, tol: float, mode: str) -> dict:
         run_cfg = run_cfg.replace({"output": {"times": [j * T / CHECKS for j in range(1, CHECKS + 1)]}},
                                   label="check times")
     model = build_model(run_cfg, MPI.COMM_SELF, p.geo)
-    steps = [0]
-    rec = ref.measure(model, extra_seconds=planning)
-    steps[0] = rec["levels"]
+    rec = measure(ref, model, planning)
     out = {"mode": mode, "degree": p.degree, "k": p.k, "cells": p.geo.num_cells(), "planning": planning,
-           "loop": rec["loop_seconds"], "cost": rec["cost"], "error": rec["error"], "compared": rec["levels"],
+           "loop": rec["loop_seconds"], "steps": rec["steps"], "rejected": rec["rejected"], "cost": rec["cost"],
+           "error": rec["error"], "compared": rec["levels"],
            "estimate": p.estimate.total, "time_part": p.estimate.time, "stages": dict(p.stages),
            "failure": rec["failure"]}
     del model, p
@@ -108,8 +128,8 @@ def main() -> int:
              f"against the reference (a P2 tolerance run at {args.ref_tol:g}, step a quarter of its plan's or less, "
              f"with a level at every t = j T / {CHECKS}); the adaptive run lands on those check times, the uniform "
              "run is compared at every level of its own the reference has.", "",
-             "| scene | time | chosen | error | error / TOL | compared levels | planning (s) | run (s) | plan + run (s) "
-             "| (plan + run) / uniform's |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| scene | time | chosen | steps (rejected) | error | error / TOL | compared levels | planning (s) | run (s) "
+             "| plan + run (s) | (plan + run) / uniform's |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in args.scenes:
         cfg = scene(name).replace(changes, label="--set") if changes else scene(name)
         ref = reference(cfg, args.ref_tol)
@@ -120,8 +140,9 @@ def main() -> int:
             for mode in runs:
                 rec = one(ref, cfg, args.tol, mode)
                 print(f"  round {r} {mode}: P{rec['degree']} k={rec['k']:g} {rec['cells']} cells, error "
-                      f"{rec['error']:.3e}, planning {rec['planning']:.2f} s, run {rec['loop']:.2f} s "
-                      f"({rec['compared']} levels compared)", flush=True)
+                      f"{rec['error']:.3e}, planning {rec['planning']:.2f} s, run {rec['loop']:.2f} s, "
+                      f"{rec['steps']} steps ({rec['rejected']} rejected; {rec['compared']} levels compared)",
+                      flush=True)
                 if r > 0:
                     runs[mode].append(rec)
 
@@ -134,10 +155,11 @@ def main() -> int:
             chosen = (f"P{last['degree']}, {last['cells']} cells, "
                       + (f"time.tolerance {last['time_part']:.2e} from k = {last['k']:.3g}" if mode == "adaptive"
                          else f"k = {last['k']:.3g}"))
-            lines.append(f"| {name} | {mode} | {chosen} | {last['error']:.2e} | {last['error'] / args.tol:.2f} | "
+            lines.append(f"| {name} | {mode} | {chosen} | {last['steps']} ({last['rejected']}) | {last['error']:.2e} | "
+                         f"{last['error'] / args.tol:.2f} | "
                          f"{last['compared']} | {med([x['planning'] for x in rs])} | {med([x['loop'] for x in rs])} | "
                          f"{med([x['cost'] for x in rs])} | {med(ratio)} |")
-        lines.append(f"| {name} | reference | {ref.cells} cells, k = {ref.k:.3g} | (estimate {ref.estimate:.2e}) "
+        lines.append(f"| {name} | reference | {ref.cells} cells, k = {ref.k:.3g} | | (estimate {ref.estimate:.2e}) "
                      "| | | | | | |")
         del ref
         gc.collect()
