@@ -369,6 +369,12 @@ class Planner:
         self.log(f"  P{degree}: C = {cal.C:.3g} calibrated on {cal.cells} cells and their uniform refinement "
                  f"(difference {cal.difference:.3e}, eta ratio {cal.ratio:.3f}; stored {cal.stored:.3g})")
 
+    def _keep_start(self, probe: SpaceProbe, degree: int, lv) -> None:
+        """A t = 0 solution becomes the start of zeta's runs' level 0 on its mesh (:class:`zeta.ZetaRuns`): the
+        same problem, solved already (a cold start there took the first contact's Newton path again)."""
+        if isinstance(probe, AtLevel0):
+            self.runs.start_from(lv.model.geo, degree, lv.model.u.x.array.copy())
+
     def _time(self, stage: str, started: float) -> None:
         self.stages[stage] = self.stages.get(stage, 0.0) + time.perf_counter() - started
 
@@ -414,6 +420,7 @@ class Planner:
             z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
+            self._keep_start(probe, degree, lv)
             cells = lv.cell_indicators
             seq.append(MeshRecord(degree, geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator, uniform=True))
             self.log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {seq[-1].estimate:.3e}, zeta's space "
@@ -479,6 +486,7 @@ class Planner:
         while True:
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
+            self._keep_start(probe, degree, lv)
             rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, self.C[degree] * lv.indicator,
                              geo=lv.model.geo, seconds=time.perf_counter() - round_started)
             seq.append(rec)

@@ -124,15 +124,22 @@ class PilotRun:
     u: list[np.ndarray] = field(default_factory=list)
     zeta: list[np.ndarray] = field(default_factory=list)
     indicator: list[float] = field(default_factory=list)
+    newton: list[int] = field(default_factory=list)  # Newton's iterations per level
 
 
-def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool = False) -> PilotRun:
-    """Run ``cfg`` on ``geo`` keeping every level's u and zeta, and the indicator with ``indicator``."""
+def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool = False,
+              start: np.ndarray | None = None) -> PilotRun:
+    """Run ``cfg`` on ``geo`` keeping every level's u and zeta, and the indicator with ``indicator``. ``start``: the
+    solution of the t = 0 problem on ``geo`` at u's degree (this process's array, ghosts included), level 0's Newton
+    start (one iteration instead of a cold first contact); ignored where its size differs on any process."""
     model = build_model(cfg, comm, geo)
+    if comm.allreduce(start is not None and start.size == model.u.x.array.size, op=MPI.LAND):
+        model.u.x.array[:] = start
     est = estimator_for(model) if indicator else None
     out = PilotRun(model)
     for row in levels(model):
         out.t.append(row["t"])
+        out.newton.append(row["newton_iterations"])
         out.u.append(model.u.x.array.copy())
         if model.damage is not None:
             out.zeta.append(model.damage.zeta.x.array.copy())
