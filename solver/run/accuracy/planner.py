@@ -44,12 +44,12 @@ from solver.physics.estimator import dorfler
 
 from .calibration import Calibration, calibrate
 from .constants import COST_PER_DOF, adapted_rate, c_times_2mu
-from .ingredients import SIMPLIFY_FRACTION, Ingredient, degree_change, pilot_changes, simplified, without
+from .ingredients import SIMPLIFY_FRACTION, Ingredient, at_step, degree_change, pilot_changes, simplified, without
 from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
-from .solves import AtLargestLevel, AtLevel0, SpaceProbe, solve_level0
-from .time_error import StepChoice, choose_step, controller_step, restep
+from .solves import AtLargestLevel, AtLevel0, PilotRun, SpaceProbe, solve_level0
+from .time_error import StepChoice, choose_step, controller_step, first_pilot, restep
 from .zeta import ZetaRuns, zeta_difference, zeta_space
 
 Log = Callable[[str], None]
@@ -152,8 +152,13 @@ class Planner:
     """One plan from a :class:`Setup` (:meth:`plan` runs it). Holds what the stages share: each degree's sequence
     of solved meshes and the zeta runs already made."""
 
-    def __init__(self, setup: Setup, comm: MPI.Comm, log: Log) -> None:
+    def __init__(self, setup: Setup, comm: MPI.Comm, log: Log, first: PilotRun | None = None,
+                 changes: list[Ingredient] | None = None) -> None:
+        """``first``: the coarsest pilot of the scene, already run (:func:`time_error.first_pilot`); ``changes``: the
+        ingredients' changes already measured, the order's at that pilot's step (the simplified scene's plan gets
+        both from the full scene's, :meth:`_simplified`)."""
         self.setup, self.comm, self.log = setup, comm, log
+        self.first, self.known = first, changes
         self.acc = setup.scene.accuracy
         self.seqs: dict[int, list[MeshRecord]] = {d: [] for d in self.acc.degrees}
         self.runs = ZetaRuns()
@@ -169,20 +174,34 @@ class Planner:
         s, acc = self.setup, self.acc
         pilot = with_changes(s.base, degrees(min(acc.degrees)))  # the time error hardly depends on the degree
         started = time.perf_counter()
-        by = controller_step if acc.time == "adaptive" else choose_step
-        chosen = by(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
-        self._time("step", started)
         self.stages["prepare"] = started - s.started
-        self.chosen = chosen
-        started = time.perf_counter()
-        # the controller's steps are not known before the run: the order's change at the pilot's step, unscaled
-        changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
-                                chosen.k0, chosen.k0 if chosen.adaptive else chosen.k)
-        self._time("ingredients", started)
-        if acc.simplify:
-            changes, left_out = simplified(changes, s.tol)
+        if acc.simplify and self.known is None:
+            # the ingredients first (on the coarsest pilot): a simplified scene is planned without the full scene's
+            # step doubling, from the run without what it leaves out
+            first = self.first or first_pilot(pilot, self.comm, s.geo0, s.tol)
+            self._time("step", started)
+            started = time.perf_counter()
+            k0, runs = first.model.cfg.time.k, {}
+            measured = pilot_changes(first, with_changes(pilot, step(k0)), self.comm, s.geo0, s.order, k0, k0, runs)
+            self._time("ingredients", started)
+            marked, left_out = simplified(measured, s.tol)
             if left_out > 0.0:
-                return self._simplified(changes, left_out)
+                return self._simplified(marked, left_out, runs)
+            self.first, self.known = first, marked
+            started = time.perf_counter()
+        by = controller_step if acc.time == "adaptive" else choose_step
+        chosen = by(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log, self.first)
+        self._time("step", started)
+        self.chosen = chosen
+        # the controller's steps are not known before the run: the order's change at the pilot's step, unscaled
+        k_order = chosen.k0 if chosen.adaptive else chosen.k
+        if self.known is not None:
+            changes = at_step(self.known, chosen.k0, k_order)
+        else:
+            started = time.perf_counter()
+            changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
+                                    chosen.k0, k_order)
+            self._time("ingredients", started)
         # the space parts get what the chosen step leaves of TOL
         share = s.tol - chosen.error
         at_k0 = with_changes(s.base, step(chosen.k0))
@@ -222,10 +241,12 @@ class Planner:
                  + ", ".join(f"{k} {v:.2f}" for k, v in self.stages.items()) + ")")
         return out
 
-    def _simplified(self, changes: list, left_out: float) -> Plan:
+    def _simplified(self, changes: list, left_out: float, runs: dict) -> Plan:
         """The plan of the scene without the ingredients ``changes`` marks dropped, for the tolerance less their
         changes (``left_out``); the result is the full model's within the tolerance. The plan keeps the user's
-        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part."""
+        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part. It starts
+        from what the full scene's measured: the start mesh, the run without the one ingredient left out (``runs``,
+        its first pilot) and the changes of those kept (not measured again)."""
         s = self.setup
         scene = s.scene
         for i in changes:
@@ -236,7 +257,13 @@ class Planner:
                  f"{left_out / s.tol:.2g} TOL <= {SIMPLIFY_FRACTION:g} TOL); planned for TOL - {left_out:.2e}")
         scene = scene.replace({"accuracy": {"tolerance": s.tol - left_out, "relative": False, "simplify": False}},
                               label="accuracy.simplify")
-        inner = Planner(prepare(scene, self.comm, self.log), self.comm, self.log).plan()
+        setup = prepare(scene, self.comm, self.log)
+        dropped = [i.name for i in changes if i.dropped]
+        first = None
+        if setup.start == s.start and setup.order == s.order:
+            setup = replace(setup, geo0=s.geo0)  # the same start mesh: the pilot runs' arrays are on it
+            first = runs.get(dropped[0]) if len(dropped) == 1 else None
+        inner = Planner(setup, self.comm, self.log, first, [i for i in changes if not i.dropped]).plan()
         seconds = time.perf_counter() - s.started
         est = replace(inner.estimate, model=left_out)
         kept = {i.name: i for i in inner.ingredients}

@@ -109,19 +109,34 @@ def time_estimate(runs: list[PilotRun], order: int, comm: MPI.Comm) -> TimeEstim
     return TimeEstimate(p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1))
 
 
-def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
-                log: Callable[[str], None]) -> StepChoice:
-    """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
-    T / n (n at least the pilots' coarsest T / k0) whose time error is within SAFETY times ``share``. ``tol`` names
-    the tolerance in a refusal."""
+def first_pilot(pilot: Config, comm: MPI.Comm, geo: Geometry, tol: float) -> PilotRun:
+    """The coarsest pilot, at k0 = T / N0 with the indicator (k0 halved while the scheme cannot take it): the first
+    of the step doubling's three, and the ingredients' reference (:mod:`.ingredients`). ``tol`` names the tolerance
+    in a refusal."""
     k0 = pilot.time.T / N0
     for _ in range(START_HALVINGS):
         try:
-            pilots = [pilot_run(with_changes(pilot, step(k0 / 2**j)), comm, geo, indicator=(j == 0))
+            return pilot_run(with_changes(pilot, step(k0)), comm, geo, indicator=True)
+        except SolveFailure:
+            k0 /= 2
+    raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+
+
+def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
+                log: Callable[[str], None], first: PilotRun | None = None) -> StepChoice:
+    """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
+    T / n (n at least the pilots' coarsest T / k0) whose time error is within SAFETY times ``share``. ``tol`` names
+    the tolerance in a refusal. ``first``: the coarsest pilot already run (:func:`first_pilot`), k0 its step."""
+    k0 = pilot.time.T / N0 if first is None else first.model.cfg.time.k
+    for _ in range(START_HALVINGS):
+        try:
+            pilots = [first if j == 0 and first is not None else
+                      pilot_run(with_changes(pilot, step(k0 / 2**j)), comm, geo, indicator=(j == 0))
                       for j in range(3)]
             break
         except SolveFailure:
             k0 /= 2
+            first = None
     else:
         raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
     est = time_estimate(pilots, order, comm)
@@ -147,21 +162,15 @@ def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share:
 
 
 def controller_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
-                    log: Callable[[str], None]) -> StepChoice:
+                    log: Callable[[str], None], first: PilotRun | None = None) -> StepChoice:
     """The step of the run's controller (``time.adaptive``): its tolerance is ``share`` (the time's share of the
     tolerance, all of it: the controller keeps the sum of its steps' estimated errors within SHARE of it, see
     solver/run/adaptive.py), its first step k0 / FIRST_STEP_DIVISOR (the first ``order`` steps have no estimate).
     One pilot run at k0 = T / N0 on ``geo`` (halved while the scheme cannot take it) gives the indicator's growth
-    over the run and is the ingredients' reference. ``tol`` names the tolerance in a refusal."""
-    k0 = pilot.time.T / N0
-    for _ in range(START_HALVINGS):
-        try:
-            run = pilot_run(with_changes(pilot, step(k0)), comm, geo, indicator=True)
-            break
-        except SolveFailure:
-            k0 /= 2
-    else:
-        raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+    over the run and is the ingredients' reference (``first``: that run already made). ``tol`` names the tolerance
+    in a refusal."""
+    run = first_pilot(pilot, comm, geo, tol) if first is None else first
+    k0 = run.model.cfg.time.k
     indicator = np.array(run.indicator)
     largest = int(np.argmax(indicator))
     growth = float(indicator[largest] / indicator[0]) if indicator[0] > 0 else math.inf
