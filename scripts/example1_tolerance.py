@@ -53,28 +53,37 @@ def main() -> int:
     cmd = f"python -m solver run configs/example1.toml --tolerance {args.tol:g}"
     whole, imports, planning, loop, stages = [], [], [], [], []
     other: dict[str, list[float]] = {"whole": [], "planning": [], "loop": []}
+    plans: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         command = [py, "-m", "solver", "run", "configs/example1.toml", "--tolerance", f"{args.tol:g}", "--output", tmp,
                    "--overwrite", "--no-progress", "--set", "output.xdmf=false"]
-        for _ in range(args.rounds):
-            s, _ = timed([py, "-c", "import solver.cli"])
-            imports.append(s)
+        def here() -> None:
             s, text = timed(command)
             whole.append(s)
             plan = json.loads((Path(tmp) / "plan.json").read_text())
             planning.append(plan["planning_seconds"])
             stages.append(plan["planning_stages"])
+            plans.append(plan)
             # the CLI's "done in" counts from before the planning: the run is what it adds
             loop.append(float(re.search(r"done in ([0-9.]+) s", text).group(1)) - planning[-1])
             print(f"import {imports[-1]:.2f} s, command {whole[-1]:.2f} s, planning {planning[-1]:.2f} s, "
                   f"run {loop[-1]:.2f} s", flush=True)
-            if args.against:
-                s, text = timed(command, Path(args.against))
-                other["whole"].append(s)
-                other["planning"].append(json.loads((Path(tmp) / "plan.json").read_text())["planning_seconds"])
-                other["loop"].append(float(re.search(r"done in ([0-9.]+) s", text).group(1)) - other["planning"][-1])
-                print(f"  {args.against}: command {s:.2f} s, planning {other['planning'][-1]:.2f} s, run "
-                      f"{other['loop'][-1]:.2f} s", flush=True)
+
+        def there() -> None:
+            s, text = timed(command, Path(args.against))
+            other["whole"].append(s)
+            other["planning"].append(json.loads((Path(tmp) / "plan.json").read_text())["planning_seconds"])
+            other["loop"].append(float(re.search(r"done in ([0-9.]+) s", text).group(1)) - other["planning"][-1])
+            print(f"  {args.against}: command {s:.2f} s, planning {other['planning'][-1]:.2f} s, run "
+                  f"{other['loop'][-1]:.2f} s", flush=True)
+
+        for r in range(args.rounds):
+            s, _ = timed([py, "-c", "import solver.cli"])
+            imports.append(s)
+            # with another checkout, the order alternates too (this tree first in even rounds, the other in odd)
+            for step in ((here, there) if r % 2 == 0 else (there, here)) if args.against else (here,):
+                step()
+    plan = plans[-1]
     ratio = [p / r for p, r in zip(planning, loop)]
     lines = [f"# Example 1 at `--tolerance {args.tol:g}` (`python scripts/example1_tolerance.py`)", "",
              f"{args.rounds} rounds, alternated with the import alone; median (range), seconds of wall time on a shared "
@@ -86,7 +95,8 @@ def main() -> int:
              f"| the run it chose (the CLI's \"done in\" less the planning: the model's build and the loop) "
              f"| {spread(loop)} |",
              f"| planning / run | {spread(ratio)} |", "",
-             *([f"The same command from `{args.against}`, alternated with this tree's in every round:", "",
+             *([f"The same command from `{args.against}`, alternated with this tree's in every round (this tree first in "
+                "the 1st, 3rd, ... round, second in the others):", "",
                 "| what | seconds | this tree / it, per round |", "|---|---|---|",
                 f"| whole command | {spread(other['whole'])} | "
                 f"{spread([a / b for a, b in zip(whole, other['whole'])])} |",
