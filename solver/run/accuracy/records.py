@@ -19,7 +19,7 @@ class ErrorEstimate:
 
     space_u: float  # C times the estimator's indicator, times its growth over the run
     space_zeta: float  # the damage's space error, from nested meshes
-    time: float  # the time error of the chosen step, by step doubling
+    time: float  # the time error of the chosen step, by step doubling (adaptive steps: the controller's tolerance)
     model: float = 0.0  # the changes of the ingredients accuracy.simplify left out (ingredients.py)
 
     @property
