@@ -161,8 +161,9 @@ def test_the_steps_come_from_the_controller_where_asked(comm):
     assert p.adaptive and cfg.time.adaptive and cfg.time.tolerance == p.estimate.time and cfg.time.k == p.k
     assert p.degree == 2 and p.estimate.total <= 3e-3 and p.summary()["time"] == "adaptive"
     serial = plan(_short().replace(no_damage), MPI.COMM_SELF, log=lambda *a: None) if comm.size > 1 else p
-    assert (p.degree, p.k, p.geo.num_cells()) == (serial.degree, serial.k, serial.geo.num_cells())
-    assert math.isclose(p.estimate.time, serial.estimate.time, rel_tol=1e-12)
+    assert (p.degree, p.geo.num_cells()) == (serial.degree, serial.geo.num_cells())
+    # the first step and the tolerance follow the estimates (a kept mesh's room): equal up to round-off
+    assert math.isclose(p.k, serial.k, rel_tol=1e-8) and math.isclose(p.estimate.time, serial.estimate.time, rel_tol=1e-8)
     rows = _controller_rows(p, comm)
     assert rows[-1]["t"] == pytest.approx(0.2) and all(math.isfinite(r["error_estimate"]) for r in rows)
     assert all(r["error_estimate"] > 0 for r in rows[3:])
