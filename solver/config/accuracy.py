@@ -12,7 +12,9 @@ import math
 from dataclasses import dataclass
 
 from .discretization import DEGREES
-from .fields import Ctx, boolean, check_keys, integer, names, need, number
+from .fields import Ctx, boolean, check_keys, integer, names, need, number, string
+
+TIME_MODES = ("uniform", "adaptive")  # accuracy.time: how the plan's step is chosen
 
 
 @dataclass(frozen=True)
@@ -20,7 +22,9 @@ class AccuracyConfig:
     """``tolerance``: bound on max over levels of ||eps(u - u_exact)|| + ||zeta - zeta_exact|| (absolute; with
     ``relative``, times ||eps(u_0)||). ``space_share`` of it goes to the mesh, the rest to the step; ``theta``
     is the Dörfler fraction; ``degrees`` the displacement degrees the solver may choose from; ``simplify`` leaves
-    out the memory term and the damage where they change the answer by little (solver/run/accuracy/ingredients.py)."""
+    out the memory term and the damage where they change the answer by little (solver/run/accuracy/ingredients.py);
+    ``time`` is how the step is chosen: ``uniform`` (one step for the run, by step doubling on pilot runs) or
+    ``adaptive`` (the run-time step controller, ``time.adaptive``, with the time's share as ``time.tolerance``)."""
 
     tolerance: float | None = None
     relative: bool = False
@@ -29,6 +33,7 @@ class AccuracyConfig:
     max_dofs: int = 2_000_000
     degrees: tuple[int, ...] = DEGREES
     simplify: bool = False
+    time: str = "uniform"
 
     @property
     def enabled(self) -> bool:
@@ -54,7 +59,8 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> AccuracyConfig:
     degrees = tuple(sorted({integer(ctx, "accuracy.degrees", x) for x in raw}))
     need(ctx, "accuracy.degrees", raw, set(degrees) <= set(DEGREES), "allowed: a list of degrees from 1, 2")
     simplify = boolean(ctx, "accuracy.simplify", t.get("simplify", d.simplify))
-    return AccuracyConfig(tol, relative, share, theta, max_dofs, degrees, simplify)
+    mode = string(ctx, "accuracy.time", t.get("time", d.time), TIME_MODES)
+    return AccuracyConfig(tol, relative, share, theta, max_dofs, degrees, simplify, mode)
 
 
 def tolerance(ctx: Ctx, key: str, v) -> float:

@@ -14,7 +14,7 @@ import typing
 from collections.abc import Iterator
 from typing import NamedTuple
 
-from . import boundary, material, memory, mesh, output, solver
+from . import accuracy, boundary, material, memory, mesh, output, solver
 from .discretization import DEGREES
 from .scene import SECTIONS, Config
 
@@ -108,6 +108,8 @@ MEANING: dict[str, str] = {
     "accuracy.degrees": "displacement degrees the planner may choose from",
     "accuracy.simplify": "leave out the memory term and the damage where together they change the answer by at most "
                          "a tenth of the tolerance (plan.json lists each ingredient's change)",
+    "accuracy.time": "how the step is chosen: uniform (one step, by step doubling on pilot runs) or adaptive (the "
+                     "run-time step controller, time.adaptive, with the time's share of the tolerance)",
 }
 
 # Allowed values that are a list of choices, from the section modules' constants.
@@ -120,6 +122,7 @@ CHOICES: dict[str, tuple] = {
     "time.order": (1, 2), "memory.kernel": memory.KERNELS, "memory.rule": memory.RULES,
     "solver.linear": solver.LINEAR, "solver.method": solver.METHODS, "solver.damage_scheme": solver.DAMAGE_SCHEMES,
     "output.fields": output.FIELD_NAMES, "output.precision": output.PRECISIONS, "accuracy.degrees": DEGREES,
+    "accuracy.time": accuracy.TIME_MODES,
 }
 
 # BoundaryConfig fields that are not TOML keys, and where they come from.

@@ -70,21 +70,33 @@ class Reactions:
         ops = problem.ops
         self.dirichlet = ops.dirichlet
         self.columns = self.dirichlet.columns
+        self._K: PETSc.Mat | None = None  # K_full's Dirichlet rows, assembled at the first use (:attr:`K`)
+        self.contact_form = problem.contact.residual_form if problem.contact is not None else None
+
+    @property
+    def K(self) -> PETSc.Mat:
+        """K_full's Dirichlet rows (local row j is the owned dof constrained[j]), from the cells at those dofs; made
+        at the first use, not at the build (a model solved once without a row does not pay for them). Collective."""
+        if self._K is None:
+            self._rows()
+        return self._K
+
+    def _rows(self) -> None:
+        ops = self.problem.ops
         constrained = self.dirichlet.constrained
-        # K_full's Dirichlet rows (local row j is the owned dof constrained[j]), from the cells at those dofs
         K = fpetsc.assemble_matrix(dirichlet_rows_form(ops, constrained))  # no Dirichlet rows or columns removed
         K.assemble()
         start, end = K.getOwnershipRange()
         rows = PETSc.IS().createGeneral((constrained + start).astype(PETSc.IntType), comm=self.comm)
         cols = PETSc.IS().createStride(end - start, start, 1, comm=self.comm)
-        self.K = K.createSubMatrix(rows, cols)
+        self._K = K.createSubMatrix(rows, cols)
         K.destroy()
-        self.Ku = self.K.createVecLeft()
+        self.Ku = self._K.createVecLeft()
         self.position = {key: np.searchsorted(constrained, dofs) for key, dofs in self.dirichlet.dofs.items()}
         self.R = ops.b.duplicate()
-        self.contact_form = problem.contact.residual_form if problem.contact is not None else None
 
     def row(self) -> dict[str, float]:
+        K = self.K
         ops, R = self.problem.ops, self.R
         with R.localForm() as r:
             r.set(0.0)
@@ -95,7 +107,7 @@ class Reactions:
         if ops.memory_force is not None:
             R.axpy(1.0, ops.memory_force)
         R.axpy(-1.0, ops.loads)
-        self.K.mult(self.problem.u.vector, self.Ku)
+        K.mult(self.problem.u.vector, self.Ku)
         values, Ku = R.array_r, self.Ku.array_r
         local = np.array([values[dofs].sum() + Ku[self.position[key]].sum() for key, dofs in self.dirichlet.dofs.items()])
         total = self.comm.allreduce(local, op=MPI.SUM) if len(local) else local
@@ -116,18 +128,39 @@ class DisplacementDiagnostics:
         self.has_contact = bool(parts)
         self.force_form = fem.form(contact.force(u, geo, parts, degree)) if parts else None
         self.length_form = fem.form(contact.active_length(u, geo, parts, degree)) if parts else None
-        self.traces = ContactTraces(geo, u, parts, degree, pressure_floor) if parts else None
-        self.parts = parts
+        self.parts, self._degree, self._floor = parts, degree, pressure_floor
+        self._traces: ContactTraces | None = None
         self._warned = False
-        self._tables = _reachable_tables(self.traces, parts) if self.traces is not None else {}  # once, not per level
+        self._tables: dict[str, ReachableError] | None = None
         self.peak_columns = ("peak_pressure",) + tuple(f"peak_pressure_{a}" for a in "xyz"[: geo.dim]) if parts else ()
-        self.gram = None
-        if strain_norm is None:
-            V = u.function_space
+        self._gram = None
+
+    # the traces and the Gram matrix are made at their first use, not at the build: a model solved once and
+    # never asked for a row (the accuracy planner's t = 0 solves) does not pay for them
+    @property
+    def traces(self) -> ContactTraces | None:
+        """The contact traces on Γ_C (None without contact), made at the first use."""
+        if self._traces is None and self.parts:
+            self._traces = ContactTraces(self.geo, self.u, self.parts, self._degree, self._floor)
+        return self._traces
+
+    @property
+    def gram(self) -> PETSc.Mat:
+        """(eps(du), eps(w)), the strain norm's matrix, assembled at the first use."""
+        if self._gram is None:
+            V = self.u.function_space
             du, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-            self.gram = fpetsc.assemble_matrix(fem.form(ufl.inner(strain(du), strain(w)) * ufl.dx))
-            self.gram.assemble()
-            self._work = self.gram.createVecLeft()
+            self._gram = fpetsc.assemble_matrix(fem.form(ufl.inner(strain(du), strain(w)) * ufl.dx))
+            self._gram.assemble()
+            self._work = self._gram.createVecLeft()
+        return self._gram
+
+    @property
+    def tables(self) -> dict[str, ReachableError]:
+        """The linear gap tables the contact can reach (made once, not per level)."""
+        if self._tables is None:
+            self._tables = _reachable_tables(self.traces, self.parts) if self.parts else {}
+        return self._tables
 
     def _integral(self, form) -> float:
         return 0.0 if form is None else self.geo.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
@@ -153,7 +186,8 @@ class DisplacementDiagnostics:
         """||eps(u)||_L2: at the memory points where given, else sqrt(u . G u)."""
         if self._point_norm is not None:
             return self._point_norm()
-        self.gram.mult(self.u.vector, self._work)
+        gram = self.gram
+        gram.mult(self.u.vector, self._work)
         return float(np.sqrt(max(self._work.dot(self.u.vector), 0.0)))
 
     @property
@@ -164,7 +198,7 @@ class DisplacementDiagnostics:
     def peak(self) -> dict[str, float]:
         """The largest contact pressure over Γ_C and its point (the traces as :meth:`row` updated them)."""
         value, x = self.traces.peak()
-        if not self._warned and value > 0 and self._tables:
+        if not self._warned and value > 0 and self.tables:
             self._warned = _warn_coarse_tables(self.parts, self._zone_errors(value), value)
         return dict(zip(self.peak_columns, (value, *(float(c) for c in x[: self.geo.dim]))))
 
@@ -178,13 +212,13 @@ class DisplacementDiagnostics:
         traces = self.traces
         out = {}
         for part in self.parts:
-            if part.name not in self._tables:
+            if part.name not in self.tables:
                 out[part.name] = 0.0
                 continue
             dofs = traces.part_dofs[part.name]
             g = traces.gap.x.array[dofs[traces.pressure.x.array[dofs] > ZONE * peak]]
             reach = self.geo.comm.allreduce(float(g.max()) if len(g) else -np.inf, op=MPI.MAX)
-            out[part.name] = self._tables[part.name].up_to(reach)
+            out[part.name] = self.tables[part.name].up_to(reach)
         return out
 
     def row(self) -> dict[str, float]:

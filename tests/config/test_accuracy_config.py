@@ -19,7 +19,8 @@ def test_bad_tolerances_are_refused(bad):
 
 
 @pytest.mark.parametrize("key,bad", [("space_share", "0"), ("space_share", "1"), ("theta", "1.5"), ("max_dofs", "0"),
-                                     ("degrees", "[]"), ("degrees", "[3]"), ("simplify", "1"), ("simplify", "\"yes\"")])
+                                     ("degrees", "[]"), ("degrees", "[3]"), ("simplify", "1"), ("simplify", "\"yes\""),
+                                     ("time", "\"variable\""), ("time", "true")])
 def test_bad_settings_are_refused(key, bad):
     with pytest.raises(ConfigError) as err:
         load(SCENE, [f"accuracy.{key}={bad}"])
@@ -33,3 +34,8 @@ def test_a_tolerance_on_a_3d_scene_is_accepted():
 def test_simplify_is_off_unless_asked():
     assert load(SCENE).accuracy.simplify is False
     assert load(SCENE, ["accuracy.simplify=true"]).accuracy.simplify is True
+
+
+def test_the_step_is_uniform_unless_the_controller_is_asked_for():
+    assert load(SCENE).accuracy.time == "uniform"
+    assert load(SCENE, ['accuracy.time="adaptive"']).accuracy.time == "adaptive"

@@ -62,3 +62,31 @@ def test_a_plan_reports_every_ingredient_and_simplify_plans_without_those_it_lea
     assert p.config.accuracy.tolerance == pytest.approx(tol - left)  # planned for what the ingredients left
     assert p.estimate.total <= tol
     assert any(line.startswith("accuracy.simplify: left out") for line in lines)
+
+
+def test_a_simplified_plan_reuses_the_full_scenes_pilots(comm, monkeypatch):
+    """One ingredient left out: the simplified scene's step doubling starts from the run without it (made for the
+    report) and its ingredients are not measured again: 1 + 4 pilot runs of the full scene and 2 of the simplified
+    one's step doubling (13 before: both scenes' step doubling and ingredients whole). The report is the full
+    scene's changes, the order's at the simplified plan's step."""
+    from solver.run.accuracy import time_error
+
+    tol = 0.3
+    scene = load(SCENE).replace({"time": {"T": 0.2}, "accuracy": {"tolerance": tol}})
+    whole = planner.plan(scene, comm, log=lambda *a: None)
+    full = {i.name: i.change for i in whole.ingredients}
+    smallest = min(("memory", "damage"), key=lambda n: full[n])
+    fraction = 1.01 * full[smallest] / tol  # only the smallest fits
+    monkeypatch.setattr(ingredients, "SIMPLIFY_FRACTION", fraction)
+    monkeypatch.setattr(planner, "SIMPLIFY_FRACTION", fraction)
+    made = []
+    for module in (time_error, ingredients):
+        real = module.pilot_run
+        monkeypatch.setattr(module, "pilot_run", lambda *a, real=real, **k: made.append(1) or real(*a, **k))
+    p = planner.plan(scene.replace({"accuracy": {"simplify": True}}), comm, log=lambda *a: None)
+    assert {i.name for i in p.ingredients if i.dropped} == {smallest}
+    assert len(made) == 7
+    got = {i.name: i for i in p.ingredients}
+    assert got[smallest].change == pytest.approx(full[smallest], rel=1e-9)
+    assert got["order"].change == pytest.approx(full["order"] * p.k / whole.k, rel=1e-9)
+    assert p.estimate.total <= tol

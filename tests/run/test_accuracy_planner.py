@@ -141,3 +141,44 @@ def test_where_the_indicator_grows_the_mesh_is_adapted_to_its_largest_level(monk
     assert any("level of largest eta" in line for line in lines), lines
     last = [r for r in p.adaptation if r.degree == p.degree][-1]
     assert p.estimate.space_u == last.estimate
+
+
+def _controller_rows(p, comm):
+    """The levels of the plan's run (the controller's rows: k, error_estimate)."""
+    from solver.run.model import build_model
+    from solver.run.stepper import levels
+
+    return list(levels(build_model(p.config.replace({"output": {"xdmf": False}}), comm, p.geo)))
+
+
+def test_the_steps_come_from_the_controller_where_asked(comm):
+    """accuracy.time = adaptive: the run's controller with the time's share as its tolerance and the plan's first
+    step; without damage any degree (P2 here); the controller estimates every step after the first two; the same plan
+    on 2 ranks as on one."""
+    no_damage = {"damage": {"enabled": False}, "accuracy": {"tolerance": 3e-3, "time": "adaptive"}}
+    p = plan(_short().replace(no_damage), comm, log=lambda *a: None)
+    cfg = p.config
+    assert p.adaptive and cfg.time.adaptive and cfg.time.tolerance == p.estimate.time and cfg.time.k == p.k
+    assert p.degree == 2 and p.estimate.total <= 3e-3 and p.summary()["time"] == "adaptive"
+    serial = plan(_short().replace(no_damage), MPI.COMM_SELF, log=lambda *a: None) if comm.size > 1 else p
+    assert (p.degree, p.geo.num_cells()) == (serial.degree, serial.geo.num_cells())
+    # the first step and the tolerance follow the estimates (a kept mesh's room): equal up to round-off
+    assert math.isclose(p.k, serial.k, rel_tol=1e-8) and math.isclose(p.estimate.time, serial.estimate.time, rel_tol=1e-8)
+    rows = _controller_rows(p, comm)
+    assert rows[-1]["t"] == pytest.approx(0.2) and all(math.isfinite(r["error_estimate"]) for r in rows)
+    assert all(r["error_estimate"] > 0 for r in rows[3:])
+
+
+def test_with_damage_the_controller_plans_degree_1_only(comm):
+    """The controller has no damage estimate at degree 2 (zero lumped masses at P2's vertices): P1, said in the
+    log, and its run's steps are estimated; degree 2 alone is refused naming accuracy.time."""
+    from solver.errors import ConfigError
+
+    lines = []
+    p = plan(_short().replace({"accuracy": {"tolerance": 1e-2, "time": "adaptive"}}), comm, log=lines.append)
+    assert p.degree == 1 and p.adaptive and any("degree 1 only" in line for line in lines), lines
+    rows = _controller_rows(p, comm)
+    assert all(r["error_estimate"] > 0 for r in rows[3:])
+    with pytest.raises(ConfigError) as err:
+        _plan(comm, 1e-2, {"time": "adaptive", "degrees": [2]})
+    assert err.value.key == "accuracy.time"

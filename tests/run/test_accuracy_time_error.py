@@ -1,4 +1,4 @@
-"""solver/run/accuracy/time_error.py: the time part by step doubling."""
+"""solver/run/accuracy/time_error.py: the time part by step doubling, or by the run's step controller."""
 import math
 
 import numpy as np
@@ -9,7 +9,17 @@ from solver.config import load
 from solver.mesh.geometry import build
 from solver.run.accuracy.scene import start_mesh, with_changes
 from solver.run.accuracy.solves import PilotRun
-from solver.run.accuracy.time_error import N0, SAFETY, choose_step, norms, time_estimate
+from solver.run.accuracy.time_error import (
+    FIRST_STEP_DIVISOR,
+    N0,
+    SAFETY,
+    StepChoice,
+    choose_step,
+    controller_step,
+    norms,
+    restep,
+    time_estimate,
+)
 from solver.run.model import build_model
 
 
@@ -69,8 +79,6 @@ def test_the_chosen_step_is_the_largest_within_its_share(comm):
 
 
 def test_restep_takes_the_largest_step_within_the_budget():
-    from solver.run.accuracy.time_error import StepChoice, restep
-
     chosen = StepChoice(0.1, 1.0 / 46, 2.0, 4e-5, np.array([0.0, 0.5]), np.array([1e-5, 4e-5]), 1.0, 0.0)
     assert restep(chosen, 5e-5, 1.0) is chosen  # room enough: unchanged
     assert restep(chosen, 0.0, 1.0) is None
@@ -80,3 +88,25 @@ def test_restep_takes_the_largest_step_within_the_budget():
     assert smaller.error == pytest.approx(4e-5 * (46 / n) ** 2) and smaller.error <= 3.6e-5
     assert 4e-5 * (46 / (n - 1)) ** 2 > 3.6e-5  # one step fewer would not fit
     assert smaller.profile[-1] == pytest.approx(smaller.error)
+
+
+def test_the_controllers_step_is_the_time_share_from_one_pilot(comm):
+    cfg = load(ROOT / "configs/example1.toml").replace({"time": {"T": 0.2}})
+    cfg = with_changes(cfg, start_mesh(cfg, comm), {"discretization": {"u_degree": 1, "zeta_degree": 1}})
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    chosen = controller_step(cfg, comm, geo, 2, 1e-4, 1e-3, log=lambda *a: None)
+    assert chosen.adaptive and chosen.error == 1e-4 and chosen.rate == 2.0
+    assert chosen.k0 == cfg.time.T / N0 and chosen.k == chosen.k0 / FIRST_STEP_DIVISOR
+    assert len(chosen.pilot.t) == N0 + 1  # one pilot at k0, not three
+    assert chosen.growth >= 1.0 and 0.0 <= chosen.largest_t <= cfg.time.T
+    # the growth is the one step doubling's first pilot measures (the same run)
+    doubling = choose_step(cfg, comm, geo, 2, 1e-4, 1e-3, log=lambda *a: None)
+    assert chosen.growth == pytest.approx(doubling.growth, rel=1e-10)
+
+
+def test_restep_of_the_controller_makes_its_tolerance_the_budget():
+    chosen = StepChoice(0.1, 0.0125, 2.0, 4e-5, np.array([0.0]), np.array([4e-5]), 1.0, 0.0, adaptive=True)
+    assert restep(chosen, 5e-5, 1.0) is chosen and restep(chosen, -1e-6, 1.0) is None
+    smaller = restep(chosen, 1e-5, 1.0)
+    assert smaller.adaptive and smaller.error == 1e-5 and smaller.profile[-1] == pytest.approx(1e-5)
+    assert smaller.k == pytest.approx(0.0125 * 0.25**0.5)  # the first step scaled as the error ~ k^order

@@ -142,3 +142,29 @@ def test_in_3d_the_exponents_are_the_same_rates_in_h():
     assert observed_exponent(cells, e[0] - e[1], e[1] - e[2], 2, 3) == pytest.approx(0.8, rel=1e-9)
     slow = [n ** -0.2 for n in cells]  # slower than 1 in h: clamped to 1/3
     assert observed_exponent(cells, slow[0] - slow[1], slow[1] - slow[2], 2, 3) == pytest.approx(1 / 3)
+
+
+def test_a_zeta_run_starts_from_the_t0_solution_on_its_mesh(comm):
+    """ZetaRuns.start_from: level 0 of a run on that mesh starts from the t = 0 problem's solution there (the same
+    problem): the same run, level 0 in fewer Newton iterations than from zero; another mesh starts from zero."""
+    import numpy as np
+
+    from solver.mesh.geometry import build
+    from solver.run.accuracy.scene import degrees, with_changes
+    from solver.run.accuracy.solves import solve_level0
+
+    cfg = with_changes(load(SCENE), {"time": {"T": 0.2, "k": 0.1}, "mesh": {"nx": 8, "ny": 8}}, degrees(2))
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    at_0 = solve_level0(cfg, comm, geo)
+    runs = ZetaRuns()
+    runs.start_from(geo, 2, at_0.model.u.x.array.copy())
+    warm = runs.on(cfg, comm, [geo])[0]
+    cold = ZetaRuns().on(cfg, comm, [geo])[0]
+    assert warm.newton[0] < cold.newton[0]
+    scale = np.abs(cold.u[-1]).max()
+    for a, b in zip(warm.u, cold.u):
+        assert np.allclose(a, b, atol=1e-8 * scale)
+    for a, b in zip(warm.zeta, cold.zeta):
+        assert np.allclose(a, b, atol=1e-10)
+    other = refine_uniformly(geo)  # no start given there: from zero, as before
+    assert runs.on(cfg, comm, [other])[0].newton[0] == ZetaRuns().on(cfg, comm, [other])[0].newton[0]

@@ -4,7 +4,8 @@
 Where to read it:
 
 - :mod:`.planner` -- the plan, stage by stage (:func:`plan`);
-- :mod:`.time_error` -- the step, by step doubling; :mod:`.zeta` -- the damage's space part on nested meshes;
+- :mod:`.time_error` -- the step, by step doubling or from the run's step controller (``accuracy.time``); :mod:`.zeta` --
+  the damage's space part on nested meshes;
 - :mod:`.solves` -- the solves the planner measures with, and the strategies that judge u's mesh;
 - :mod:`.records` -- what a plan chose (:class:`Plan`, plan.json) and its estimates;
 - :mod:`.sensor` -- the run's estimated error per level (:class:`ErrorSensor`);

@@ -17,7 +17,7 @@ tolerance, so that the full model's error stays within it (the triangle inequali
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from dolfinx import fem
@@ -99,16 +99,19 @@ def pilot_difference(ref: PilotRun, other: PilotRun, zeta0: float, comm: MPI.Com
 
 
 def pilot_changes(ref: PilotRun, cfg: Config, comm: MPI.Comm, geo: Geometry, order: int, k0: float,
-                  k: float) -> list[Ingredient]:
+                  k: float, runs: dict[str, PilotRun] | None = None) -> list[Ingredient]:
     """The changes of memory, truncation, damage and order, each from a run of ``cfg`` (the pilot ``ref``'s scene, at
-    step ``k0``) without it on ``geo``; the order's scaled to the chosen step ``k``."""
+    step ``k0``) without it on ``geo``; the order's scaled to the chosen step ``k``. ``runs``: filled with the runs
+    without each of DROPPABLE (with the indicator: a simplified scene's first pilot, :func:`.time_error.first_pilot`)."""
     out = []
     for name in present(cfg, order):
         try:
-            other = pilot_run(without(cfg, name), comm, geo)
+            other = pilot_run(without(cfg, name), comm, geo, indicator=runs is not None and name in DROPPABLE)
         except SolveFailure:
             out.append(Ingredient(name, math.nan, "its pilot did not converge"))
             continue
+        if runs is not None and name in DROPPABLE:
+            runs[name] = other
         d = pilot_difference(ref, other, cfg.damage.zeta0, comm)
         how = f"pilots at k = {k0:g} on the start mesh"
         if name == "order":
@@ -116,6 +119,12 @@ def pilot_changes(ref: PilotRun, cfg: Config, comm: MPI.Comm, geo: Geometry, ord
             how = f"pilots at k = {k0:g} on the start mesh, times k / {k0:g} (first order)"
         out.append(Ingredient(name, d, how))
     return out
+
+
+def at_step(changes: list[Ingredient], k0: float, k: float) -> list[Ingredient]:
+    """``changes`` measured with the order's scaled to ``k0`` (:func:`pilot_changes` with k = k0), the order's scaled
+    to the step ``k`` instead."""
+    return [replace(i, change=i.change * k / k0) if i.name == "order" else i for i in changes]
 
 
 def degree_change(p1: Model, p2: Model, comm: MPI.Comm) -> float:

@@ -5,7 +5,9 @@ The error is bounded by a space part and a time part (``accuracy.space_share`` o
 space part, the rest the time part). In order:
 
 1. the step (:func:`time_error.choose_step`): step doubling on the start mesh with the lowest degree; the space
-   parts then get what its time error leaves of the tolerance;
+   parts then get what its time error leaves of the tolerance. With ``accuracy.time = "adaptive"``
+   (:func:`time_error.controller_step`) the run's step controller keeps the time error within the time's share
+   instead, and one pilot run replaces the three;
 2. the degree (:meth:`Planner._degree`): one solve per degree on the start mesh; the measured rates of adapted
    meshes extrapolate the dofs each needs, times its cost per dof (``constants``);
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
@@ -35,19 +37,19 @@ import numpy as np
 from mpi4py import MPI
 
 from solver.config import Config
-from solver.errors import ToleranceError
+from solver.errors import ConfigError, ToleranceError
 from solver.mesh.adapt import refine, refine_twice, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
 
 from .calibration import Calibration, calibrate
 from .constants import COST_PER_DOF, adapted_rate, c_times_2mu
-from .ingredients import SIMPLIFY_FRACTION, Ingredient, degree_change, pilot_changes, simplified, without
+from .ingredients import SIMPLIFY_FRACTION, Ingredient, at_step, degree_change, pilot_changes, simplified, without
 from .memory import dof_limit
 from .records import ErrorEstimate, MeshRecord, Plan
 from .scene import degrees, start_mesh, step, time_order, with_changes
-from .solves import AtLargestLevel, AtLevel0, SpaceProbe, solve_level0
-from .time_error import StepChoice, choose_step, restep
+from .solves import AtLargestLevel, AtLevel0, PilotRun, SpaceProbe, solve_level0
+from .time_error import StepChoice, choose_step, controller_step, first_pilot, restep
 from .zeta import ZetaRuns, zeta_difference, zeta_space
 
 Log = Callable[[str], None]
@@ -71,6 +73,9 @@ CALIBRATE_RATIO = 128.0
 # the whole mesh) costs more than that (Example 1 at 1e-4: a round on 8,666 P2 cells about 1.4 s, a step of the run
 # about 0.2 s)
 STEPS_PER_ROUND = 4
+# the same for the run's step controller (accuracy.time = "adaptive"), whose steps are not known before the run: its
+# tolerance made smaller by at most the factor that adds this fraction of its steps (about STEPS_PER_ROUND of 40)
+MORE_STEPS_ADAPTIVE = 0.1
 # a Dörfler set of at most SMALL_SET of the cells (the estimate carried by a few cells at singular corners, near the
 # end of a 2-D sequence) is refined twice in one round (its children again): such a set's first refinement cut eta
 # only 1.2-1.6-fold each round on Example 1 (8,495 -> 8,569 -> 8,666 -> 8,742 P2 cells, one factorization of the
@@ -104,13 +109,30 @@ class Setup:
     started: float  # perf_counter at the start of planning
 
 
+def controller_degrees(scene: Config, log: Log) -> Config:
+    """The scene with ``accuracy.degrees`` the run's step controller can serve: with ``accuracy.time = "adaptive"``
+    and damage, degree 1 only (the controller's damage estimate divides by the lumped mass of zeta's space, whose
+    vertex entries are zero for P2 on triangles: it has no estimate there, and would not control the steps). A
+    ConfigError where that leaves no degree."""
+    acc = scene.accuracy
+    if acc.time != "adaptive" or not scene.damage.enabled or set(acc.degrees) <= {1}:
+        return scene
+    if 1 not in acc.degrees:
+        raise ConfigError(key="accuracy.time", value=acc.time, source=scene.source,
+                          allowed="with damage the step controller estimates degree 1 only, and accuracy.degrees = "
+                                  f"{list(acc.degrees)}: use accuracy.time = \"uniform\" or degree 1")
+    log("accuracy.time = adaptive: degree 1 only (the step controller has no damage estimate at degree 2)")
+    return with_changes(scene, {"accuracy": {"degrees": [1]}})
+
+
 def prepare(scene: Config, comm: MPI.Comm, log: Log) -> Setup:
     """The start mesh, the order, the constants, the absolute tolerance (a relative one times ||eps(u_0)||, one
     solve) and the dof limit. Collective."""
     started = time.perf_counter()
-    acc = scene.accuracy
-    if not acc.enabled:
+    if not scene.accuracy.enabled:
         raise ValueError("plan: the scene has no accuracy.tolerance")
+    scene = controller_degrees(scene, log)
+    acc = scene.accuracy
     cfg = with_changes(scene, {"output": {"xdmf": False}})
     start = start_mesh(cfg, comm)
     order = time_order(with_changes(cfg, start))
@@ -130,8 +152,13 @@ class Planner:
     """One plan from a :class:`Setup` (:meth:`plan` runs it). Holds what the stages share: each degree's sequence
     of solved meshes and the zeta runs already made."""
 
-    def __init__(self, setup: Setup, comm: MPI.Comm, log: Log) -> None:
+    def __init__(self, setup: Setup, comm: MPI.Comm, log: Log, first: PilotRun | None = None,
+                 changes: list[Ingredient] | None = None) -> None:
+        """``first``: the coarsest pilot of the scene, already run (:func:`time_error.first_pilot`); ``changes``: the
+        ingredients' changes already measured, the order's at that pilot's step (the simplified scene's plan gets
+        both from the full scene's, :meth:`_simplified`)."""
         self.setup, self.comm, self.log = setup, comm, log
+        self.first, self.known = first, changes
         self.acc = setup.scene.accuracy
         self.seqs: dict[int, list[MeshRecord]] = {d: [] for d in self.acc.degrees}
         self.runs = ZetaRuns()
@@ -147,18 +174,34 @@ class Planner:
         s, acc = self.setup, self.acc
         pilot = with_changes(s.base, degrees(min(acc.degrees)))  # the time error hardly depends on the degree
         started = time.perf_counter()
-        chosen = choose_step(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log)
-        self._time("step", started)
         self.stages["prepare"] = started - s.started
-        self.chosen = chosen
-        started = time.perf_counter()
-        changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
-                                chosen.k0, chosen.k)
-        self._time("ingredients", started)
-        if acc.simplify:
-            changes, left_out = simplified(changes, s.tol)
+        if acc.simplify and self.known is None:
+            # the ingredients first (on the coarsest pilot): a simplified scene is planned without the full scene's
+            # step doubling, from the run without what it leaves out
+            first = self.first or first_pilot(pilot, self.comm, s.geo0, s.tol)
+            self._time("step", started)
+            started = time.perf_counter()
+            k0, runs = first.model.cfg.time.k, {}
+            measured = pilot_changes(first, with_changes(pilot, step(k0)), self.comm, s.geo0, s.order, k0, k0, runs)
+            self._time("ingredients", started)
+            marked, left_out = simplified(measured, s.tol)
             if left_out > 0.0:
-                return self._simplified(changes, left_out)
+                return self._simplified(marked, left_out, runs)
+            self.first, self.known = first, marked
+            started = time.perf_counter()
+        by = controller_step if acc.time == "adaptive" else choose_step
+        chosen = by(pilot, self.comm, s.geo0, s.order, (1.0 - acc.space_share) * s.tol, s.tol, self.log, self.first)
+        self._time("step", started)
+        self.chosen = chosen
+        # the controller's steps are not known before the run: the order's change at the pilot's step, unscaled
+        k_order = chosen.k0 if chosen.adaptive else chosen.k
+        if self.known is not None:
+            changes = at_step(self.known, chosen.k0, k_order)
+        else:
+            started = time.perf_counter()
+            changes = pilot_changes(chosen.pilot, with_changes(pilot, step(chosen.k0)), self.comm, s.geo0, s.order,
+                                    chosen.k0, k_order)
+            self._time("ingredients", started)
         # the space parts get what the chosen step leaves of TOL
         share = s.tol - chosen.error
         at_k0 = with_changes(s.base, step(chosen.k0))
@@ -188,18 +231,22 @@ class Planner:
         seconds = time.perf_counter() - s.started
         out = Plan(s.tol, degree, s.order, chosen.k, geo, s.start, estimate, self.C[degree], chosen.growth,
                    chosen.rate, (chosen.times, chosen.profile), tuple(r for d in acc.degrees for r in self.seqs[d]),
-                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes), level0_u)
-        self.log(f"chosen: P{degree} (u and zeta), order {s.order}, k = {chosen.k:g} "
-                 f"({round(s.base.time.T / chosen.k)} steps), {geo.num_cells()} cells; estimated error <= "
+                   seconds, s.scene, dict(self.stages), self.calibration, tuple(changes), level0_u,
+                   adaptive=chosen.adaptive)
+        steps = (f"adaptive steps from k = {chosen.k:g}, time.tolerance = {chosen.error:.3e}" if chosen.adaptive
+                 else f"k = {chosen.k:g} ({round(s.base.time.T / chosen.k)} steps)")
+        self.log(f"chosen: P{degree} (u and zeta), order {s.order}, {steps}, {geo.num_cells()} cells; estimated error <= "
                  f"{estimate.total:.3e} (space {estimate.space_u + zeta_bound:.3e}, time {estimate.time:.3e}) for "
                  f"TOL {s.tol:.3e}; planned in {seconds:.2f} s ("
                  + ", ".join(f"{k} {v:.2f}" for k, v in self.stages.items()) + ")")
         return out
 
-    def _simplified(self, changes: list, left_out: float) -> Plan:
+    def _simplified(self, changes: list, left_out: float, runs: dict) -> Plan:
         """The plan of the scene without the ingredients ``changes`` marks dropped, for the tolerance less their
         changes (``left_out``); the result is the full model's within the tolerance. The plan keeps the user's
-        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part."""
+        tolerance, the ingredients' report and the changes left out as the estimate's ``model`` part. It starts
+        from what the full scene's measured: the start mesh, the run without the one ingredient left out (``runs``,
+        its first pilot) and the changes of those kept (not measured again)."""
         s = self.setup
         scene = s.scene
         for i in changes:
@@ -210,7 +257,13 @@ class Planner:
                  f"{left_out / s.tol:.2g} TOL <= {SIMPLIFY_FRACTION:g} TOL); planned for TOL - {left_out:.2e}")
         scene = scene.replace({"accuracy": {"tolerance": s.tol - left_out, "relative": False, "simplify": False}},
                               label="accuracy.simplify")
-        inner = Planner(prepare(scene, self.comm, self.log), self.comm, self.log).plan()
+        setup = prepare(scene, self.comm, self.log)
+        dropped = [i.name for i in changes if i.dropped]
+        first = None
+        if setup.start == s.start and setup.order == s.order:
+            setup = replace(setup, geo0=s.geo0)  # the same start mesh: the pilot runs' arrays are on it
+            first = runs.get(dropped[0]) if len(dropped) == 1 else None
+        inner = Planner(setup, self.comm, self.log, first, [i for i in changes if not i.dropped]).plan()
         seconds = time.perf_counter() - s.started
         est = replace(inner.estimate, model=left_out)
         kept = {i.name: i for i in inner.ingredients}
@@ -305,11 +358,18 @@ class Planner:
                 return False
             T = run_k0.time.T
             smaller = restep(self.chosen, self.setup.tol - rec.estimate * G - zeta, T)
-            if smaller is None or round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
+            if smaller is None:
+                return False
+            if self.chosen.adaptive:  # the controller's steps grow as its tolerance^(-1/order)
+                if (self.chosen.error / smaller.error) ** (1.0 / smaller.rate) > 1.0 + MORE_STEPS_ADAPTIVE:
+                    return False
+            elif round(T / smaller.k) - round(T / self.chosen.k) > STEPS_PER_ROUND:
                 return False
             if smaller is not self.chosen:
+                what = (f"time.tolerance = {smaller.error:.3e}" if smaller.adaptive
+                        else f"k = {smaller.k:g} ({round(T / smaller.k)} steps)")
                 self.log(f"  kept, {rec.estimate / (target if not found else (share - zeta) / G):.3f} times u's "
-                         f"target: k = {smaller.k:g} ({round(T / smaller.k)} steps) leaves it room")
+                         f"target: {what} leaves it room")
             self.chosen = smaller
             return True
 
@@ -335,6 +395,12 @@ class Planner:
         self._time("calibration", started)
         self.log(f"  P{degree}: C = {cal.C:.3g} calibrated on {cal.cells} cells and their uniform refinement "
                  f"(difference {cal.difference:.3e}, eta ratio {cal.ratio:.3f}; stored {cal.stored:.3g})")
+
+    def _keep_start(self, probe: SpaceProbe, degree: int, lv) -> None:
+        """A t = 0 solution becomes the start of zeta's runs' level 0 on its mesh (:class:`zeta.ZetaRuns`): the
+        same problem, solved already (a cold start there took the first contact's Newton path again)."""
+        if isinstance(probe, AtLevel0):
+            self.runs.start_from(lv.model.geo, degree, lv.model.u.x.array.copy())
 
     def _time(self, stage: str, started: float) -> None:
         self.stages[stage] = self.stages.get(stage, 0.0) + time.perf_counter() - started
@@ -381,6 +447,7 @@ class Planner:
             z = zeta_space(run_k0, self.comm, geo, chain, self.runs)
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
+            self._keep_start(probe, degree, lv)
             cells = lv.cell_indicators
             seq.append(MeshRecord(degree, geo.num_cells(), lv.dofs, lv.indicator, C * lv.indicator, uniform=True))
             self.log(f"  refined uniformly: {geo.num_cells()} cells, C eta = {seq[-1].estimate:.3e}, zeta's space "
@@ -446,6 +513,7 @@ class Planner:
         while True:
             lv = probe.solve(degree, self.comm, geo, self.models.get(degree))
             self.models[degree] = lv.model
+            self._keep_start(probe, degree, lv)
             rec = MeshRecord(degree, lv.model.geo.num_cells(), lv.dofs, lv.indicator, self.C[degree] * lv.indicator,
                              geo=lv.model.geo, seconds=time.perf_counter() - round_started)
             seq.append(rec)

@@ -19,7 +19,7 @@ class ErrorEstimate:
 
     space_u: float  # C times the estimator's indicator, times its growth over the run
     space_zeta: float  # the damage's space error, from nested meshes
-    time: float  # the time error of the chosen step, by step doubling
+    time: float  # the time error of the chosen step, by step doubling (adaptive steps: the controller's tolerance)
     model: float = 0.0  # the changes of the ingredients accuracy.simplify left out (ingredients.py)
 
     @property
@@ -81,6 +81,9 @@ class Plan:
     # the displacement of the last t = 0 solve on ``geo`` at ``degree`` (this process's array, ghosts included), the
     # run's level-0 Newton start (:meth:`warm_start`); None where the mesh was fitted to a later level
     level0_u: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the run's step controller chooses the steps (accuracy.time = "adaptive"): ``k`` is its first step and
+    # ``estimate.time`` its time.tolerance
+    adaptive: bool = False
 
     def warm_start(self, model) -> bool:
         """Start ``model``'s level-0 Newton (the run's, built on ``geo`` at ``degree``: the same space, so the same
@@ -94,8 +97,12 @@ class Plan:
 
     @property
     def changes(self) -> dict:
-        """The changes to the scene of the chosen degrees, order and step (the mesh is ``geo``)."""
-        return merged(self.start, degrees(self.degree), {"time": {"order": self.order, "k": self.k}})
+        """The changes to the scene of the chosen degrees, order and step (the mesh is ``geo``; adaptive: the first
+        step and the controller's tolerance)."""
+        timed = {"order": self.order, "k": self.k}
+        if self.adaptive:
+            timed.update({"adaptive": True, "tolerance": self.estimate.time})
+        return merged(self.start, degrees(self.degree), {"time": timed})
 
     @property
     def config(self) -> Config:
@@ -111,7 +118,8 @@ class Plan:
     def summary(self) -> dict:
         """plan.json's content."""
         return {"tolerance": self.tolerance, "u_degree": self.degree, "zeta_degree": self.degree, "order": self.order,
-                "k": self.k, "cells": self.geo.num_cells(), "estimate": self.estimate.as_dict(), "C": self.C,
+                "k": self.k, "time": "adaptive" if self.adaptive else "uniform", "cells": self.geo.num_cells(),
+                "estimate": self.estimate.as_dict(), "C": self.C,
                 "growth": self.growth, "time_rate": self.time_rate,
                 "adaptation": [r.summary() for r in self.adaptation], "planning_seconds": self.seconds,
                 "planning_stages": self.stages,

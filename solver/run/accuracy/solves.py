@@ -3,19 +3,25 @@ that keep every level. Each is a function that runs the solves and returns a rec
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import Config
-from solver.errors import SolveFailure
+from solver.errors import NonFiniteError, SolveFailure
 from solver.mesh.geometry import Geometry
 from solver.mesh.transfer import interpolation_matrix
 from solver.physics.estimator import estimator_for
+from solver.physics.material import strain
+from solver.physics.quadrature import all_finite
 from solver.run.model import Model, build_model
-from solver.run.stepper import Stepper, levels
+from solver.run.scheme import level_scheme
+from solver.run.stepper import levels
 
 from .scene import degrees, elastic, step, with_changes
 
@@ -64,16 +70,29 @@ def warm_start(model: Model, guess: Model | None) -> None:
     model.u.x.scatter_forward()
 
 
+def strain_norm(model: Model) -> float:
+    """||eps(u)|| of the model's displacement (one scalar assembly; collective)."""
+    e = strain(model.u)
+    local = fem.assemble_scalar(fem.form(ufl.inner(e, e) * ufl.dx))
+    return math.sqrt(max(model.comm.allreduce(local, op=MPI.SUM), 0.0))
+
+
 def solve_level0(cfg: Config, comm: MPI.Comm, geo: Geometry, guess: Model | None = None) -> LevelSolve:
     """The t = 0 problem of ``cfg`` on ``geo`` (without memory and damage, which level 0 does not touch); Newton
-    starts from ``guess``'s solution where given (:func:`warm_start`)."""
+    starts from ``guess``'s solution where given (:func:`warm_start`). Only the displacement is solved: none of
+    the time series' diagnostics (a row's contact traces, reactions and Gram matrix are made at their first use,
+    which a t = 0 solve of the planner never is); ||eps(u_0)|| by one scalar assembly."""
     model = build_model(elastic(cfg), comm, geo)
     warm_start(model, guess)
-    row = Stepper(model).step(0)
+    try:
+        info, _ = level_scheme(model, model.scheme).displacement(0, 0.0, None)
+    except SolveFailure as exc:
+        raise exc.at(0, 0.0) from None
+    if not comm.allreduce(bool(all_finite(model.u.x.array)), op=MPI.LAND):
+        raise NonFiniteError(["displacement"])
     est = estimator_for(model)
     cells = est.cells()
-    return LevelSolve(model, est.total(cells), cells, displacement_dofs(model), row["strain_norm"],
-                      row["newton_iterations"])
+    return LevelSolve(model, est.total(cells), cells, displacement_dofs(model), strain_norm(model), info.iterations)
 
 
 def solve_largest_level(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolve:
@@ -105,15 +124,22 @@ class PilotRun:
     u: list[np.ndarray] = field(default_factory=list)
     zeta: list[np.ndarray] = field(default_factory=list)
     indicator: list[float] = field(default_factory=list)
+    newton: list[int] = field(default_factory=list)  # Newton's iterations per level
 
 
-def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool = False) -> PilotRun:
-    """Run ``cfg`` on ``geo`` keeping every level's u and zeta, and the indicator with ``indicator``."""
+def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool = False,
+              start: np.ndarray | None = None) -> PilotRun:
+    """Run ``cfg`` on ``geo`` keeping every level's u and zeta, and the indicator with ``indicator``. ``start``: the
+    solution of the t = 0 problem on ``geo`` at u's degree (this process's array, ghosts included), level 0's Newton
+    start (one iteration instead of a cold first contact); ignored where its size differs on any process."""
     model = build_model(cfg, comm, geo)
+    if comm.allreduce(start is not None and start.size == model.u.x.array.size, op=MPI.LAND):
+        model.u.x.array[:] = start
     est = estimator_for(model) if indicator else None
     out = PilotRun(model)
     for row in levels(model):
         out.t.append(row["t"])
+        out.newton.append(row["newton_iterations"])
         out.u.append(model.u.x.array.copy())
         if model.damage is not None:
             out.zeta.append(model.damage.zeta.x.array.copy())

@@ -1,8 +1,13 @@
-"""The time part: step doubling on the start mesh (docs/guide/accuracy.md, "step").
+"""The time part (docs/guide/accuracy.md, "step").
 
-Runs at k0, k0/2 and k0/4 (k0 = T/N0) give the observed order p (at most the scheme's) and the error of k0/4,
-D/(2^p - 1), in the paper's norm (docs/model.md §3.6); the step is the largest T/n (n >= N0) whose extrapolated
-error is within SAFETY times the time's share of the tolerance.
+``accuracy.time = "uniform"`` (:func:`choose_step`): step doubling on the start mesh. Runs at k0, k0/2 and k0/4
+(k0 = T/N0) give the observed order p (at most the scheme's) and the error of k0/4, D/(2^p - 1), in the paper's
+norm (docs/model.md §3.6); the step is the largest T/n (n >= N0) whose extrapolated error is within SAFETY times
+the time's share of the tolerance.
+
+``accuracy.time = "adaptive"`` (:func:`controller_step`): the run's step controller (``time.adaptive``,
+docs/model.md §3.9) keeps the time error within ``time.tolerance``, the time's share of the tolerance; one pilot
+run at k0 (the indicator's growth, the ingredients' changes) and no step doubling.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ N0 = 10  # the coarsest step is T / N0; every step considered is T / n, n >= N0
 SAFETY = 0.8  # of the time's share, for the extrapolated error of the chosen step
 START_HALVINGS = 6  # a start step the scheme cannot take is halved, and the three runs start again
 MAX_HALVINGS = 20  # the step is refused below T / (N0 2^MAX_HALVINGS)
+FIRST_STEP_DIVISOR = 8  # the controller's first step is k0 / this (the step doubling's finest pilot is k0 / 4)
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,7 @@ class StepChoice:
     growth: float  # the indicator's largest level over its level 0 (the first pilot)
     largest_t: float  # the time of that level
     pilot: PilotRun | None = None  # the run at k0 (the ingredients' changes are measured against it)
+    adaptive: bool = False  # the run's step controller chooses the steps: k is its first step, error its tolerance
 
 
 def norms(model: Model, comm: MPI.Comm) -> tuple[Callable[[np.ndarray], float], Callable[[np.ndarray], float]]:
@@ -102,19 +109,34 @@ def time_estimate(runs: list[PilotRun], order: int, comm: MPI.Comm) -> TimeEstim
     return TimeEstimate(p, m2 / (2**p - 1), np.array(runs[1].t), d2 / (2**p - 1))
 
 
-def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
-                log: Callable[[str], None]) -> StepChoice:
-    """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
-    T / n (n at least the pilots' coarsest T / k0) whose time error is within SAFETY times ``share``. ``tol`` names
-    the tolerance in a refusal."""
+def first_pilot(pilot: Config, comm: MPI.Comm, geo: Geometry, tol: float) -> PilotRun:
+    """The coarsest pilot, at k0 = T / N0 with the indicator (k0 halved while the scheme cannot take it): the first
+    of the step doubling's three, and the ingredients' reference (:mod:`.ingredients`). ``tol`` names the tolerance
+    in a refusal."""
     k0 = pilot.time.T / N0
     for _ in range(START_HALVINGS):
         try:
-            pilots = [pilot_run(with_changes(pilot, step(k0 / 2**j)), comm, geo, indicator=(j == 0))
+            return pilot_run(with_changes(pilot, step(k0)), comm, geo, indicator=True)
+        except SolveFailure:
+            k0 /= 2
+    raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
+
+
+def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
+                log: Callable[[str], None], first: PilotRun | None = None) -> StepChoice:
+    """Step doubling of ``pilot`` on ``geo``, which also gives how the indicator evolves over the run; the largest
+    T / n (n at least the pilots' coarsest T / k0) whose time error is within SAFETY times ``share``. ``tol`` names
+    the tolerance in a refusal. ``first``: the coarsest pilot already run (:func:`first_pilot`), k0 its step."""
+    k0 = pilot.time.T / N0 if first is None else first.model.cfg.time.k
+    for _ in range(START_HALVINGS):
+        try:
+            pilots = [first if j == 0 and first is not None else
+                      pilot_run(with_changes(pilot, step(k0 / 2**j)), comm, geo, indicator=(j == 0))
                       for j in range(3)]
             break
         except SolveFailure:
             k0 /= 2
+            first = None
     else:
         raise ToleranceError(tol, math.nan, 0, "time.k (no pilot step converged)")
     est = time_estimate(pilots, order, comm)
@@ -139,13 +161,37 @@ def choose_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share:
                       pilots[0])
 
 
+def controller_step(pilot: Config, comm: MPI.Comm, geo: Geometry, order: int, share: float, tol: float,
+                    log: Callable[[str], None], first: PilotRun | None = None) -> StepChoice:
+    """The step of the run's controller (``time.adaptive``): its tolerance is ``share`` (the time's share of the
+    tolerance, all of it: the controller keeps the sum of its steps' estimated errors within SHARE of it, see
+    solver/run/adaptive.py), its first step k0 / FIRST_STEP_DIVISOR (the first ``order`` steps have no estimate).
+    One pilot run at k0 = T / N0 on ``geo`` (halved while the scheme cannot take it) gives the indicator's growth
+    over the run and is the ingredients' reference (``first``: that run already made). ``tol`` names the tolerance
+    in a refusal."""
+    run = first_pilot(pilot, comm, geo, tol) if first is None else first
+    k0 = run.model.cfg.time.k
+    indicator = np.array(run.indicator)
+    largest = int(np.argmax(indicator))
+    growth = float(indicator[largest] / indicator[0]) if indicator[0] > 0 else math.inf
+    k = k0 / FIRST_STEP_DIVISOR
+    log(f"start mesh: eta grows x{growth:.3g} over the run; the steps from the run's controller, time.tolerance = "
+        f"{share:.3e}, first step {k:g}")
+    return StepChoice(k0, k, float(order), share, np.array([0.0]), np.array([share]), growth, run.t[largest], run,
+                      adaptive=True)
+
+
 def restep(chosen: StepChoice, budget: float, T: float) -> StepChoice | None:
     """The largest T / n whose time error, scaled from ``chosen``'s by (k / chosen.k)^rate, is within ``budget``
-    (what the space parts leave of the tolerance); None if none (budget <= 0)."""
+    (what the space parts leave of the tolerance); None if none (budget <= 0). For the controller's step
+    (``chosen.adaptive``): its tolerance made ``budget`` and its first step scaled alike."""
     if chosen.error <= budget:
         return chosen
     if budget <= 0.0:
         return None
+    if chosen.adaptive:
+        scale = budget / chosen.error
+        return replace(chosen, k=chosen.k * scale ** (1.0 / chosen.rate), error=budget, profile=chosen.profile * scale)
     k = chosen.k * (budget / chosen.error) ** (1.0 / chosen.rate)
     n = math.ceil(T / k * (1.0 - 1e-12))
     k = T / n

@@ -14,6 +14,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
@@ -34,10 +35,20 @@ ZETA_EXPONENT_MAX = {1: 1.0, 2: 1.5}
 
 
 class ZetaRuns:
-    """Runs of a scene with damage at one step on nested meshes, each made once per (mesh, step)."""
+    """Runs of a scene with damage at one step on nested meshes, each made once per (mesh, step). A run's level 0
+    starts from the t = 0 solution :meth:`start_from` was given for its mesh and degree, where there is one."""
 
     def __init__(self) -> None:
         self._made: dict[tuple[int, float], PilotRun] = {}
+        self._starts: dict[tuple[int, int], tuple[Geometry, np.ndarray]] = {}
+
+    def start_from(self, geo: Geometry, degree: int, u0: np.ndarray) -> None:
+        """The t = 0 problem's solution on ``geo`` at u's ``degree``: a run there starts from it."""
+        self._starts[id(geo), degree] = (geo, u0)
+
+    def _start(self, geo: Geometry, degree: int) -> np.ndarray | None:
+        kept = self._starts.get((id(geo), degree))
+        return kept[1] if kept is not None and kept[0] is geo else None
 
     def on(self, cfg: Config, comm: MPI.Comm, geos: Sequence[Geometry]) -> list[PilotRun]:
         """Runs of ``cfg`` on ``geos`` at its step; if Newton fails on one, all at half the step (up to HALVINGS
@@ -48,7 +59,8 @@ class ZetaRuns:
             try:
                 for geo in geos:
                     if (id(geo), k) not in self._made:
-                        self._made[id(geo), k] = pilot_run(at_step, comm, geo)
+                        start = self._start(geo, cfg.discretization.u_degree)
+                        self._made[id(geo), k] = pilot_run(at_step, comm, geo, start=start)
                 return [self._made[id(geo), k] for geo in geos]
             except SolveFailure:
                 if halving == HALVINGS:
