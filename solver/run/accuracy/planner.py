@@ -37,7 +37,7 @@ import numpy as np
 from mpi4py import MPI
 
 from solver.config import Config
-from solver.errors import ConfigError, ToleranceError
+from solver.errors import ToleranceError
 from solver.mesh.adapt import refine, refine_twice, refine_uniformly
 from solver.mesh.geometry import Geometry, build
 from solver.physics.estimator import dorfler
@@ -109,29 +109,12 @@ class Setup:
     started: float  # perf_counter at the start of planning
 
 
-def controller_degrees(scene: Config, log: Log) -> Config:
-    """The scene with ``accuracy.degrees`` the run's step controller can serve: with ``accuracy.time = "adaptive"``
-    and damage, degree 1 only (the controller's damage estimate divides by the lumped mass of zeta's space, whose
-    vertex entries are zero for P2 on triangles: it has no estimate there, and would not control the steps). A
-    ConfigError where that leaves no degree."""
-    acc = scene.accuracy
-    if acc.time != "adaptive" or not scene.damage.enabled or set(acc.degrees) <= {1}:
-        return scene
-    if 1 not in acc.degrees:
-        raise ConfigError(key="accuracy.time", value=acc.time, source=scene.source,
-                          allowed="with damage the step controller estimates degree 1 only, and accuracy.degrees = "
-                                  f"{list(acc.degrees)}: use accuracy.time = \"uniform\" or degree 1")
-    log("accuracy.time = adaptive: degree 1 only (the step controller has no damage estimate at degree 2)")
-    return with_changes(scene, {"accuracy": {"degrees": [1]}})
-
-
 def prepare(scene: Config, comm: MPI.Comm, log: Log) -> Setup:
     """The start mesh, the order, the constants, the absolute tolerance (a relative one times ||eps(u_0)||, one
     solve) and the dof limit. Collective."""
     started = time.perf_counter()
     if not scene.accuracy.enabled:
         raise ValueError("plan: the scene has no accuracy.tolerance")
-    scene = controller_degrees(scene, log)
     acc = scene.accuracy
     cfg = with_changes(scene, {"output": {"xdmf": False}})
     start = start_mesh(cfg, comm)
