@@ -79,13 +79,13 @@ class AutoSolver(DisplacementMethod):
         f0 = core.factorizations
         if self.switched:
             try:
-                return self.takeover.solve(scale)
+                return self._handed_over(scale)
             except DisplacementSolveError as exc:
                 if not self._direct_if_linear_failed(exc):
                     raise
                 self._start.copy(u.vector)  # the level again from its start, solved directly
                 u.x.scatter_forward()
-                info = self.takeover.solve(scale)
+                info = self._handed_over(scale)
                 return replace(info, iterations=info.iterations + exc.iterations,
                                linear_solves=info.linear_solves + exc.iterations, factorizations=core.factorizations - f0)
         core.test.growth_limit = GROWTH_STEPS
@@ -133,9 +133,9 @@ class AutoSolver(DisplacementMethod):
         return True
 
     def _handed_over(self, scale: float) -> SolveInfo:
-        """The take-over's solve of the level handed over, with the damped fallback's budget (FALLBACK_IT_FACTOR
-        times its limit; later levels get the limit itself): a first contact in 3-D takes some 40 of its
-        iterations (docs/model.md §4)."""
+        """The take-over's solve of a level, with the damped fallback's budget (FALLBACK_IT_FACTOR times its limit),
+        the level handed over and every later one: a first contact in 3-D takes some 40 of its iterations, and so
+        does the next level of a sphere pressed further (docs/model.md §4)."""
         test = self.takeover.test
         limit = test.max_it
         test.max_it = FALLBACK_IT_FACTOR * limit
