@@ -101,9 +101,10 @@ def test_reactions_assemble_only_the_dirichlet_rows(comm, dim):
         PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
     start, end = whole.getOwnershipRange()
     scale = whole.norm(PETSc.NormType.NORM_INFINITY)
+    K = reactions.K  # made at the first use, collectively: on every rank, also one that owns no constrained dof
     for j, dof in enumerate(constrained + start):
         cols, want = whole.getRow(int(dof))
-        got_cols, got = reactions.K.getRow(reactions.K.getOwnershipRange()[0] + j)
+        got_cols, got = K.getRow(K.getOwnershipRange()[0] + j)
         # the same entries; their values the same sums, in parallel possibly added in another order (round-off)
         full = np.zeros(whole.getSize()[1])
         full[cols] = want
