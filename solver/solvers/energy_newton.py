@@ -34,12 +34,12 @@ from solver.physics.displacement import SolveInfo
 from solver.solvers.damped_newton import DampedResult, along, has_energy, line_minimum
 from solver.solvers.linear import REASONS_SNES
 from solver.solvers.method import DisplacementMethod
-from solver.solvers.newton import NewtonCore, NewtonTest
+from solver.solvers.newton import NewtonCore, NewtonTest, RetriesDirectly
 
 FREE_STEPS = 2  # a level's first steps to a new active set are taken in full, whatever their residual
 
 
-class EnergyNewtonSolver(DisplacementMethod):
+class EnergyNewtonSolver(RetriesDirectly, DisplacementMethod):
     """Each contact level solved by Newton steps with an exact line search on the energy (see the module
     docstring), on :class:`NewtonCore`'s KSP (options under ``mech_``) and to plain Newton's test with the scene's
     ``max_it``. Requires an energy (:func:`~damped_newton.has_energy`)."""
@@ -67,25 +67,6 @@ class EnergyNewtonSolver(DisplacementMethod):
         if self._vectors is None:
             self._vectors = [self.problem.u.vector.duplicate() for _ in range(4)]
         return self._vectors
-
-    def solve(self, scale: float) -> SolveInfo:
-        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError. Where the
-        iterative linear solve fails, the level again on the direct solver (NewtonCore.solve_level), unless
-        ``retry_direct`` is off (auto's take-over: auto retries itself)."""
-        if not (self.retry_direct and (self.core.iterative or self.core.on_direct)):
-            return self._solve(scale)
-        if self._start is None:
-            self._start = self.problem.u.vector.duplicate()
-        self.problem.u.vector.copy(self._start)
-        return self.core.solve_level(lambda: self._solve(scale), self._start)
-
-    def scalars(self) -> dict[str, float]:
-        """The linear solver's switch (NewtonCore.scalars)."""
-        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
-
-    def restore_scalars(self, scalars: dict[str, float]) -> None:
-        if self.retry_direct:
-            self.core.restore_scalars(scalars)
 
     def _solve(self, scale: float) -> SolveInfo:
         core = self.core

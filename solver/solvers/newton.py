@@ -369,7 +369,38 @@ class NewtonCore:
                          krylov_iterations=krylov)
 
 
-class NewtonSolver(DisplacementMethod):
+class RetriesDirectly:
+    """A method on a :class:`NewtonCore` whose level, where the iterative linear solve fails, is solved again from its
+    start on the direct solver (:meth:`NewtonCore.solve_level`), unless ``retry_direct`` is off (auto's take-over:
+    auto retries itself). The method's own level is ``_solve``; its ``core``, ``problem`` and ``retry_direct`` are
+    set by it, ``_start`` (None) too."""
+
+    core: NewtonCore
+    retry_direct: bool
+    _start: PETSc.Vec | None
+
+    def _solve(self, scale: float) -> SolveInfo:
+        raise NotImplementedError
+
+    def solve(self, scale: float) -> SolveInfo:
+        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
+        if not (self.retry_direct and (self.core.iterative or self.core.on_direct)):
+            return self._solve(scale)
+        if self._start is None:
+            self._start = self.problem.u.vector.duplicate()
+        self.problem.u.vector.copy(self._start)
+        return self.core.solve_level(lambda: self._solve(scale), self._start)
+
+    def scalars(self) -> dict[str, float]:
+        """The linear solver's switch (NewtonCore.scalars)."""
+        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
+
+    def restore_scalars(self, scalars: dict[str, float]) -> None:
+        if self.retry_direct:
+            self.core.restore_scalars(scalars)
+
+
+class NewtonSolver(RetriesDirectly, DisplacementMethod):
     """Semismooth Newton (:class:`NewtonCore`'s SNES) on a :class:`DisplacementProblem`, one level per
     :meth:`solve`; a level plain Newton fails goes to the damped fallback where ``fallback`` allows it."""
 
@@ -392,23 +423,6 @@ class NewtonSolver(DisplacementMethod):
     def fallbacks(self) -> int:
         """Levels solved by the damped fallback."""
         return self.fallback.levels
-
-    def solve(self, scale: float) -> SolveInfo:
-        """Solve the level (u holds the previous level as initial guess); raise DisplacementSolveError."""
-        if not (self.retry_direct and (self.core.iterative or self.core.on_direct)):
-            return self._solve(scale)
-        if self._start is None:
-            self._start = self.problem.u.vector.duplicate()
-        self.problem.u.vector.copy(self._start)
-        return self.core.solve_level(lambda: self._solve(scale), self._start)
-
-    def scalars(self) -> dict[str, float]:
-        """The linear solver's switch (NewtonCore.scalars)."""
-        return self.core.scalars() if self.retry_direct and self.core.switchable else {}
-
-    def restore_scalars(self, scalars: dict[str, float]) -> None:
-        if self.retry_direct:
-            self.core.restore_scalars(scalars)
 
     def _solve(self, scale: float) -> SolveInfo:
         core = self.core
