@@ -17,7 +17,9 @@ semismooth Newton: full step, halved until ||F|| falls below (1 - 1e-4 lam) time
 values; M = 1 monotone), ``hold:THETA`` (points whose state would change with |r| below THETA times the median r
 of the set's points in contact keep their state, unless they are all the changes), ``path:R1,R2,...`` (a level whose
 first predicted step does not keep its set restarts from its start on the compliance path with these stiffness
-ratios, one step each, then the stiff law). Writes OUT.csv: variant, total, largest, per-level counts.
+ratios, one step each, then the stiff law), ``tail:K`` (a point leaving contact takes the same point of up to K
+next facets in full contact with it: the tail behind a lift-off edge; needs a straight contact side).
+Writes OUT.csv: variant, total, largest, per-level counts.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ FREE_STEPS, PREDICT, RATIOS, STIFF = 2, 0.5, (1.0, 10.0, 100.0), 1000.0  # the s
 
 def dump(scene: str, n: int, out: Path) -> None:
     """Run ``scene`` at P2, order 2, n x n with every reduced level saved to ``out``."""
-    from solver.solvers import reduced
+    from solver.solvers import point_contact, reduced
 
     out.mkdir(parents=True, exist_ok=True)
     shipped_run = reduced.PointReduced.run
@@ -58,10 +60,17 @@ def dump(scene: str, n: int, out: Path) -> None:
                  NBp=NB.indptr, NBshape=NB.shape, c=pc.c, W=pc.W, inv_mu=np.nan_to_num(pc.inv_mu.astype(float)),
                  v=self.dofs.gather(self.problem.u.vector.array_r[self.dofs.local]),
                  previous=self.previous if self.previous is not None else np.zeros(0), scale=self.scale,
-                 rtol=self.settings.rtol, unorm=self.problem.u.vector.norm())
+                 rtol=self.settings.rtol, unorm=self.problem.u.vector.norm(), x=pc.x)
         return shipped_run(self)
 
     reduced.PointReduced.run = run
+    shipped_init = point_contact.PointContact.__init__
+
+    def init(self, points, dofs, u):
+        shipped_init(self, points, dofs, u)
+        self.x = points.x[:, 0]  # the points' x (serial: N_B's order), for the tail variant
+
+    point_contact.PointContact.__init__ = init
     sets = ["discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2", "output.xdmf=false",
             f"mesh.nx={n}", f"mesh.ny={n}", f"output.directory='{out / 'run'}'"]
     sys.argv = ["solver", "run", scene, "--overwrite", *[a for s in sets for a in ("--set", s)]]
@@ -83,6 +92,7 @@ class Level:
         self.v0 = z["v"]
         self.prev = z["previous"] if z["previous"].size else None
         self.scale, self.rtol, self.unorm = float(z["scale"]), float(z["rtol"]), float(z["unorm"])
+        self.order = np.argsort(z["x"], kind="stable") if "x" in z else None  # the points along a straight side
         self.chol = sla.cho_factor(self.S)
         self.eye = np.eye(len(self.v0))
 
@@ -134,8 +144,26 @@ class Level:
         return float(np.max(self.W * self.imu * compliance, initial=0.0))
 
 
-def iterate(L: Level, v, steps: list, limit: int, predict: bool, W=None, hold: float = 0.0):
-    """PointReduced._iterate (``hold`` > 0: the hold variant); returns v and how it ended."""
+def tail(L: Level, state, sy, reach: int):
+    """The tail variant: a point leaving contact takes with it the same point of the next ``reach`` facets on
+    either side that are in contact on all three points (three points a facet, in x order on a straight side)."""
+    o = L.order
+    so, st = sy[o].copy(), state[o]
+    q = len(so)
+    for j in np.where((st > 0) & (so == 0))[0]:
+        for sign in (-1, 1):
+            for k in range(1, reach + 1):
+                jj = j + sign * 3 * k
+                if not (0 < jj < q - 1 and so[jj] > 0 and st[jj] > 0 and so[jj - 1] > 0 and so[jj + 1] > 0):
+                    break
+                so[jj] = 0
+    out = np.empty_like(sy)
+    out[o] = so
+    return sy if np.array_equal(out, state) else out
+
+
+def iterate(L: Level, v, steps: list, limit: int, predict: bool, W=None, hold: float = 0.0, reach: int = 0):
+    """PointReduced._iterate (``hold`` > 0, ``reach`` > 0: those variants); returns v and how it ended."""
     W = L.W if W is None else W
     r = L.NB @ v + L.c
     state = L.state(r)
@@ -157,6 +185,8 @@ def iterate(L: Level, v, steps: list, limit: int, predict: bool, W=None, hold: f
             typical = float(np.median(ry[on])) if on.any() else 0.0
             change = np.where(sy != state, np.abs(ry), 0.0)
             sy = np.where((change < hold * typical) & (change < change.max()), state, sy).astype(np.int8)
+        if reach > 0:
+            sy = tail(L, state, sy, reach)
         steps.append(fn)
         fy = L.fnorm(v + d, ry, W)
         if sy.tobytes() not in seen and (len(seen) <= FREE_STEPS or fy < fn):
@@ -217,6 +247,8 @@ def solve(L: Level, variant: str) -> int:
         v, how = iterate(L, v, steps, limit, not path)
     elif name == "hold":
         v, how = iterate(L, v, steps, limit, True, hold=float(arg))
+    elif name == "tail":
+        v, how = iterate(L, v, steps, limit, True, reach=int(arg))
     elif name == "merit":
         v, how = merit_iterate(L, v, steps, 60, int(arg))
     elif name == "smooth":
