@@ -55,6 +55,58 @@ def _distances(points: np.ndarray, simplices: np.ndarray) -> np.ndarray:
     return np.abs(height) + outside
 
 
+def _missing_facets(mesh: dmesh.Mesh) -> int:
+    """How many facets no rank integrates: the facets of the mesh less the owned ones with two cells here (the
+    interior facets ``dS`` visits) and the owned exterior ones (``ds``). 0 on a correctly ghosted mesh. Collective."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_entities(tdim - 1)
+    mesh.topology.create_connectivity(tdim - 1, tdim)
+    facets = mesh.topology.index_map(tdim - 1)
+    links = np.diff(mesh.topology.connectivity(tdim - 1, tdim).offsets)[:facets.size_local]
+    here = int(np.count_nonzero(links == 2)) + len(cpp.mesh.exterior_facet_indices(mesh.topology))
+    return facets.size_global - mesh.comm.allreduce(here, op=MPI.SUM)
+
+
+def _keep_partition(comm: MPI.Comm, nparts: int, graph, ghosting: bool):
+    """A cell partitioner for ``create_mesh`` that leaves every cell on the rank that holds it and ghosts it on the
+    ranks of its facet neighbours (``graph`` is dolfinx's distributed dual graph: global cell numbers, in rank order)."""
+    n = graph.num_nodes
+    start = comm.exscan(n) or 0
+    ends = np.array(comm.allgather(start) + [comm.allreduce(n, op=MPI.SUM)])
+    cell = np.repeat(np.arange(n), np.diff(graph.offsets))
+    owner = np.searchsorted(ends, graph.array, side="right") - 1
+    away = owner != comm.rank
+    pairs = np.unique(cell[away] * comm.size + owner[away]) if ghosting else np.empty(0, dtype=np.int64)
+    ghost_cell, ghost_rank = pairs // comm.size, pairs % comm.size
+    offsets = np.zeros(n + 1, dtype=np.int32)
+    offsets[1:] = np.cumsum(1 + np.bincount(ghost_cell, minlength=n))
+    data = np.empty(offsets[-1], dtype=np.int32)
+    data[offsets[:-1]] = comm.rank  # the owner first, then the ranks it is a ghost on
+    run = np.arange(len(ghost_cell)) - np.searchsorted(ghost_cell, ghost_cell)
+    data[offsets[:-1][ghost_cell] + 1 + run] = ghost_rank
+    return cpp.graph.AdjacencyList_int32(data, offsets)
+
+
+def _ghosted(mesh: dmesh.Mesh) -> dmesh.Mesh:
+    """The refined mesh with a complete layer of ghost cells, its cells kept on their ranks.
+
+    dolfinx 0.5.2's ``refine(..., redistribute=False)`` can leave a facet between two ranks with only one of its
+    cells on the rank that owns it (seen on the gmsh column in 3-D): neither ``dS`` nor ``ds`` integrates that
+    facet, so the estimator's jumps miss it on that partition. Such a mesh is made again from its own cells with
+    the partition kept and the ghosts computed from the dual graph. Collective; serial meshes are returned as they
+    are."""
+    if mesh.comm.size == 1 or _missing_facets(mesh) == 0:
+        return mesh
+    tdim = mesh.topology.dim
+    nodes = mesh.geometry.index_map()
+    owned = mesh.topology.index_map(tdim).size_local
+    local = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:owned]
+    cells = nodes.local_to_global(local.ravel()).reshape(local.shape).astype(np.int64)
+    x = mesh.geometry.x[:nodes.size_local, :mesh.geometry.dim].copy()
+    partitioner = cpp.mesh.create_cell_partitioner(_keep_partition)
+    return dmesh.create_mesh(mesh.comm, cells, x, mesh.ufl_domain(), dmesh.GhostMode.shared_facet, partitioner)
+
+
 def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     """The mesh with the given local cells refined (their edges marked; Plaza adds what closure needs), its
     boundary parts re-tagged by containment in the old tagged facets. Collective."""
@@ -64,7 +116,7 @@ def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     c2e = mesh.topology.connectivity(tdim, 1)
     n_edges = 3 if tdim == 2 else 6
     edges = np.unique(c2e.array.reshape(-1, n_edges)[np.asarray(cells, dtype=np.int32)]).astype(np.int32)
-    new = equispaced(dmesh.refine(mesh, edges, redistribute=False))  # refine copies the parent's element as it is now
+    new = equispaced(_ghosted(dmesh.refine(mesh, edges, redistribute=False)))  # refine copies the parent's element
     fdim = tdim - 1
     new.topology.create_connectivity(fdim, tdim)
     exterior = cpp.mesh.exterior_facet_indices(new.topology)
