@@ -23,6 +23,7 @@ step-doubling profile at that level times (ref_k / k)^rate. The reference's own 
 
     .venv/bin/python scripts/achieved_3d.py configs/column3d.toml 0.1
     nice -n 10 .venv/bin/python scripts/achieved_3d.py configs/example1_3d.toml --tol 1e-2
+    .venv/bin/python scripts/achieved_3d.py --table
 """
 
 from __future__ import annotations
@@ -151,14 +152,46 @@ def planned(scene: str, tol: float, ref_step: float) -> int:
     return 0
 
 
+def table() -> int:
+    """benchmarks/results/achieved_3d.md from the ``--tol`` mode's JSON files."""
+    lines = ["# Achieved error of 3-D plans against nested P2 references", "",
+             "`scripts/achieved_3d.py SCENE --tol TOL` (serial; `--table` writes this file). D: the plan's difference "
+             "to the reference at the worst level; C eta_ref: the reference's own space error of u (bound by its "
+             "estimate); time: the reference's own time error (estimated) or, with the reference at the plan's step, "
+             "the plan's (estimated); achieved: orthogonality; triangle inequality.", "",
+             "| scene | TOL | plan | reference | worst t | D_u | D_zeta | C eta_ref | time (est.) | achieved "
+             "(orth.; triangle) | / TOL | plan's estimate | seconds (plan, run, reference) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for f in sorted((ROOT / "benchmarks" / "results").glob("achieved_3d_*_*.json")):
+        d = json.loads(f.read_text())
+        if "worst" not in d:
+            continue
+        p, r, w = d["plan"], d["reference"], d["worst"]
+        est = sum(p["estimate"].values())
+        lines.append(
+            f"| {Path(d['scene']).stem} | {d['tol']:g} | P{p['degree']}, k = {p['k']:g}, {p['cells']:,} cells, "
+            f"{p['dofs']:,} dofs | P2, k = {r['k']:g}, {r['cells']:,} cells, {r['dofs']:,} dofs ({r['linear']}) | "
+            f"{w['t']:g} | {w['error_u']:.3e} | {w['error_zeta']:.2e} | {w['ref_own_space']:.3e} | "
+            f"{w['ref_own_time_estimate'] + w['plan_time_estimate']:.2e} | {w['achieved_orthogonal']:.3e}; "
+            f"{w['achieved_triangle']:.3e} | {w['achieved_orthogonal'] / d['tol']:.2f}; "
+            f"{w['achieved_triangle'] / d['tol']:.2f} | {est:.3e} | {d['seconds']['plan']:.0f}, "
+            f"{d['seconds']['run']:.0f}, {d['seconds']['reference']:.0f} |")
+    (ROOT / "benchmarks" / "results" / "achieved_3d.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("scene")
+    ap.add_argument("scene", nargs="?")
+    ap.add_argument("--table", action="store_true", help="write benchmarks/results/achieved_3d.md")
     ap.add_argument("k", type=float, nargs="?", help="the first mode's step")
     ap.add_argument("--tol", type=float, help="plan for this tolerance and judge the plan")
     ap.add_argument("--ref-step", type=float, default=0.5, choices=(0.5, 1.0),
                     help="the reference's step as a fraction of the plan's")
     args = ap.parse_args()
+    if args.table:
+        return table()
     if args.tol is not None:
         return planned(args.scene, args.tol, args.ref_step)
     return fixed_mesh(args.scene, args.k)
