@@ -56,11 +56,10 @@ def _distances(points: np.ndarray, simplices: np.ndarray) -> np.ndarray:
 
 
 # Plaza (dolfinx 0.5.2) bisects each face of a tetrahedron at its longest edge and breaks an exact tie by the global
-# index of the opposite vertex, which depends on the partition: the gmsh column has 16 tied faces of 8,650, and its
-# cells below z = 0.3 refined gave 14,977 cells serially and 14,938 or 14,978 on 2 ranks. In 3-D the refinement is
-# therefore made on the mesh mapped by TIE_BREAK (I + 1e-6 B, B fixed and generic), which breaks every tie by the
-# edges' directions alike on any partition, and the refined mesh is mapped back (a linear map keeps midpoints, so
-# the new vertices are the edges' midpoints to rounding; docs/guide/accuracy.md, 3-D).
+# index of the opposite vertex, which depends on the partition. In 3-D the refinement is therefore made on the mesh
+# mapped by TIE_BREAK (I + 1e-6 B, B fixed and generic), which breaks every tie by the edges' directions alike on any
+# partition, and the refined mesh is mapped back (a linear map keeps midpoints, so the new vertices are the edges'
+# midpoints to rounding). Measured in docs/guide/accuracy.md (3-D).
 TIE_BREAK = np.eye(3) + 1e-6 * np.array([[0.3, 0.7, 0.1], [0.2, -0.4, 0.9], [-0.6, 0.5, 0.8]])
 
 
