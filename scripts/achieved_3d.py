@@ -11,7 +11,7 @@ Two modes:
   the plan's own mesh where the plan is P1 (its fields are P2 fields there), else the plan's mesh refined uniformly
   (``refine_uniformly``: 8 children per cell, so P2 on the plan's mesh is exact on it). The linear solver is the
   scene's (``auto``: the iterative solver, GAMG, from 60,000 dofs in 3-D). Writes
-  benchmarks/results/achieved_3d_<scene>_<tol>.json.
+  benchmarks/results/achieved_3d_<scene>_<tol>[_same_k].json.
 
 Per level: D_u = ||eps(u_ref - u)||, D_zeta = ||zeta_ref - zeta|| (the paper's norm, docs/model.md), and the
 reference's own space error of u bounded by its estimate C eta_ref (the 3-D C for P2, eta of the reference at that
@@ -94,7 +94,8 @@ def planned(scene: str, tol: float, ref_step: float) -> int:
     from solver.run.accuracy.planner import plan
 
     comm = MPI.COMM_SELF
-    path = ROOT / "benchmarks" / "results" / f"achieved_3d_{Path(scene).stem}_{tol:g}.json"
+    same_k = "_same_k" if ref_step == 1.0 else ""
+    path = ROOT / "benchmarks" / "results" / f"achieved_3d_{Path(scene).stem}_{tol:g}{same_k}.json"
     out: dict = {"scene": scene, "tol": tol, "ref_step": ref_step, "seconds": {}}
 
     def save() -> None:
