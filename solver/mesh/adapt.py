@@ -107,6 +107,31 @@ def _ghosted(mesh: dmesh.Mesh) -> dmesh.Mesh:
     return dmesh.create_mesh(mesh.comm, cells, x, mesh.ufl_domain(), dmesh.GhostMode.shared_facet, partitioner)
 
 
+# Plaza (dolfinx 0.5.2) bisects each face of a tetrahedron at its longest edge and breaks an exact tie by the global
+# index of the opposite vertex, which depends on the partition. In 3-D the refinement is therefore made on the mesh
+# mapped by TIE_BREAK (I + 1e-6 B, B fixed and generic), which breaks every tie by the edges' directions alike on any
+# partition, and the refined mesh is mapped back (a linear map keeps midpoints, so the new vertices are the edges'
+# midpoints to rounding). Measured in docs/guide/accuracy.md (3-D).
+TIE_BREAK = np.eye(3) + 1e-6 * np.array([[0.3, 0.7, 0.1], [0.2, -0.4, 0.9], [-0.6, 0.5, 0.8]])
+
+
+def _plaza(mesh: dmesh.Mesh, edges: np.ndarray) -> dmesh.Mesh:
+    """``dolfinx.mesh.refine`` of the marked edges (the children on their parent's rank); in 3-D under TIE_BREAK, so
+    that the same marked edges give the same mesh on any number of ranks. ``mesh`` is left as it was. Collective."""
+    if mesh.topology.dim != 3:
+        return dmesh.refine(mesh, edges, redistribute=False)  # refine copies the parent's element as it is now
+    x = mesh.geometry.x
+    kept = x.copy()
+    x[:] = kept @ TIE_BREAK.T
+    try:
+        new = dmesh.refine(mesh, edges, redistribute=False)
+    finally:
+        x[:] = kept
+    y = new.geometry.x
+    y[:] = np.linalg.solve(TIE_BREAK, y.T).T
+    return new
+
+
 def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     """The mesh with the given local cells refined (their edges marked; Plaza adds what closure needs), its
     boundary parts re-tagged by containment in the old tagged facets. Collective."""
@@ -116,7 +141,7 @@ def refine(geo: Geometry, cells: np.ndarray) -> Geometry:
     c2e = mesh.topology.connectivity(tdim, 1)
     n_edges = 3 if tdim == 2 else 6
     edges = np.unique(c2e.array.reshape(-1, n_edges)[np.asarray(cells, dtype=np.int32)]).astype(np.int32)
-    new = equispaced(_ghosted(dmesh.refine(mesh, edges, redistribute=False)))  # refine copies the parent's element
+    new = equispaced(_ghosted(_plaza(mesh, edges)))
     fdim = tdim - 1
     new.topology.create_connectivity(fdim, tdim)
     exterior = cpp.mesh.exterior_facet_indices(new.topology)
