@@ -12,7 +12,8 @@ space part, the rest the time part). In order:
    meshes extrapolate the dofs each needs, times its cost per dof (``constants``);
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
    is within its part; the solves are those of a :class:`solves.SpaceProbe` (the t = 0 problem, or coarse-step
-   runs to the level of largest indicator where it grows more than GROWTH_AT_0);
+   runs to the level of largest indicator where it grows more than GROWTH_AT_0); far from the target a round refines
+   the few cells that carry most of eta^2 (singular corners) twice (CORNER_RATIO, CORNER_THETA).
    Each solve starts from the previous mesh's solution; on the way the estimator's constant is calibrated on the
    scene (:mod:`calibration`) and zeta's part measured on a mesh about an eighth of the final one, u then aiming at
    what it leaves of the share;
@@ -63,7 +64,9 @@ ROOM_ZETA_MAX = 0.6
 ROOM_MARGIN = 0.25
 # zeta's part is measured on the adaptive sequence's mesh once the mesh u needs is predicted within ZETA_PROBE_RATIO
 # times its cells (runs at the pilots' coarsest step on a mesh about an eighth of the final one; on Example 1 at 1e-4 a
-# thirtieth gave a bound of 2.1e-5 where an eighth gave 1.6e-6, and the tighter target for u cost more than it saved)
+# thirtieth gave a bound of 2.1e-5 where an eighth gave 1.6e-6, and the tighter target for u cost more than it saved;
+# a sixteenth, the 2,194-cell mesh, gave 4.7e-6: zeta's runs cost about a third less, u's mesh grew from 8,868 cells and
+# 48 steps to 9,272 and 49, and the run paid about what the planning saved)
 ZETA_PROBE_RATIO = 8.0
 # the estimator's constant is calibrated on the scene (:func:`calibration.calibrate`) on the sequence's first mesh whose
 # predicted final mesh is within CALIBRATE_RATIO times its cells (its uniform refinement: a thirtieth of the final mesh)
