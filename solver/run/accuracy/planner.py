@@ -86,8 +86,8 @@ MORE_STEPS_ADAPTIVE = 0.1
 SMALL_SET = 0.02
 # far from the target (an estimate over CORNER_RATIO times it, so that one halving of eta cannot reach it), the
 # smallest set carrying CORNER_THETA of eta^2, where it is at most SMALL_SET of the cells (the singular corners), is
-# refined twice in the round and the rest of the Dörfler set once: one such round cut eta 2.1-3.2-fold on Example 1
-# where a plain round cut it 1.95-fold, and at 1e-4 the sequence went ... 4,260 -> 8,495 -> 8,868 cells (two
+# refined twice in the round and the rest of the Dörfler set once: one such round cut eta 2.5-3.1-fold on Example 1
+# where a plain round cut it 1.95-2.0-fold, and at 1e-4 the sequence went ... 4,260 -> 8,495 -> 8,868 cells (two
 # factorizations of 35,000 dofs) and now ... 4,288 -> 9,148 (one); with CORNER_THETA 0.3 or 0.6 the last round
 # overshot and took one more (14,141 and 12,261 cells), with 0.5 it ended at 9,997
 CORNER_RATIO = 2.0
