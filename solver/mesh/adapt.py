@@ -171,9 +171,10 @@ def refine_uniformly(geo: Geometry) -> Geometry:
     return refine(geo, np.arange(mesh.topology.index_map(mesh.topology.dim).size_local))
 
 
-def refine_twice(geo: Geometry, cells: np.ndarray) -> Geometry:
+def refine_twice(geo: Geometry, cells: np.ndarray, again: np.ndarray | None = None) -> Geometry:
     """The mesh with the given local cells refined, then every cell of the refined mesh that lies inside one of them
-    refined again (h quartered there; Plaza's closure in between), boundary parts kept. Collective."""
+    (inside one of ``again``, a subset of them, where given) refined again (h quartered there; Plaza's closure in
+    between), boundary parts kept. Collective."""
     from dolfinx import fem
 
     from solver.mesh.transfer import locate
@@ -182,7 +183,7 @@ def refine_twice(geo: Geometry, cells: np.ndarray) -> Geometry:
     tdim = finer.mesh.topology.dim
     marked = fem.Function(fem.FunctionSpace(geo.mesh, ("DG", 0)))  # the marks on the ghost cells too
     marked.x.array[:] = 0.0
-    marked.x.array[np.asarray(cells, dtype=np.int32)] = 1.0
+    marked.x.array[np.asarray(cells if again is None else again, dtype=np.int32)] = 1.0
     marked.x.scatter_forward()
     n = finer.mesh.topology.index_map(tdim).size_local
     mid = dmesh.compute_midpoints(finer.mesh, tdim, np.arange(n, dtype=np.int32))[:, :tdim]

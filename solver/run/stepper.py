@@ -32,8 +32,11 @@ TIMING_COLUMNS = ("time_damage", "time_memory", "time_displacement", "time_diagn
 class Stepper:
     """Advances a model one time level at a time; each :meth:`step` returns the level's row."""
 
-    def __init__(self, model: Model) -> None:
-        self.model = model
+    def __init__(self, model: Model, diagnostics: bool = True) -> None:
+        """``diagnostics`` False: a row without the contact's, the strain's and zeta's norms (for runs that read only
+        the fields, as the tolerance planner's pilots do: the first row builds the contact traces and the strain
+        norm's Gram matrix)."""
+        self.model, self.diagnostics = model, diagnostics
         self.k = model.cfg.time.k
         self.damage_diagnostics = DamageDiagnostics(model.geo.mesh, model.damage, model.cfg.damage.zeta0)
         self.scheme = level_scheme(model, model.scheme)
@@ -69,10 +72,11 @@ class Stepper:
             "step": n, "t": t, "newton_iterations": info.iterations, "linear_solves": info.linear_solves,
             "factorizations": info.factorizations, "residual": info.residual,
             "krylov_iterations": info.krylov_iterations, "damage_krylov_iterations": dkrylov,
-            **self.model.mech.diagnostics.row(),
+            **(self.model.mech.diagnostics.row() if self.diagnostics else {}),
             "zeta_min": zmin, "zeta_max": zmax, "zeta_raw_min": raw[0], "zeta_raw_max": raw[1], "zeta_clipped": clipped,
-            "zeta_norm": self.damage_diagnostics.zeta_norm(),
         }
+        if self.diagnostics:
+            row["zeta_norm"] = self.damage_diagnostics.zeta_norm()
         t4 = time.perf_counter()
         row.update({"time_memory": t1 - t0, "time_damage": t2 - t1, "time_displacement": t3 - t2,
                     "time_diagnostics": t4 - t3})
@@ -99,7 +103,8 @@ def writes_level(n: int, steps: int, every: int) -> bool:
     return every > 0 and n % every == 0
 
 
-def levels(model: Model, start: int = 0, sensors: tuple = (), times=None, clock=None) -> Iterator[dict]:
+def levels(model: Model, start: int = 0, sensors: tuple = (), times=None, clock=None,
+           diagnostics: bool = True) -> Iterator[dict]:
     """Solve levels ``start``..steps of the model's scene, yielding each level's row; writes nothing.
 
     ``sensors``: objects with ``columns`` and ``sensor(row) -> dict`` that add their columns to
@@ -110,11 +115,12 @@ def levels(model: Model, start: int = 0, sensors: tuple = (), times=None, clock=
     ``times``: variable steps given in advance, the levels' times t_0 = 0 < t_1 < ... (``start`` 0 only).
     ``clock``: an adaptive run's :class:`solver.run.adaptive.StepController`, which chooses the steps (and
     carries the step history a checkpoint keeps); by default the scene's (uniform, or adaptive with a new
-    controller).
+    controller). ``diagnostics`` False: rows without the diagnostics' columns (:class:`Stepper`), except with a
+    step controller (it reads the contact length).
     """
-    stepper = Stepper(model)
     if clock is None and model.cfg.time.adaptive:
         clock = StepController(model)
+    stepper = Stepper(model, diagnostics or clock is not None)
     if clock is not None:
         rows = clock.levels(stepper, start)
     elif times is not None:

@@ -196,6 +196,27 @@ def test_3d_refinement_nests_and_leaves_the_old_mesh_as_it_was(comm):
     assert dist.max() < 1e-13
 
 
+def test_refining_twice_only_a_subset_quarters_h_there_and_halves_it_in_the_other_marked_cells(comm):
+    """refine_twice(..., again): the subset's cells get 16 grandchildren, the other marked cells are refined once."""
+    from solver.mesh.adapt import refine_twice
+
+    cfg = load(ROOT / "configs/example1.toml").replace({"mesh": {"nx": 4, "ny": 4}})
+    geo = build(comm, cfg.mesh, cfg.boundaries, cfg.dim)
+    mid = geo.mesh.geometry.x[geo.mesh.geometry.dofmap.array.reshape(-1, 3)].mean(axis=1)
+    n = geo.mesh.topology.index_map(2).size_local
+    origin = (mid[:n, 0] < 0.25) & (mid[:n, 1] < 0.25)  # the two cells at (0, 0)
+    far = (mid[:n, 0] > 0.75) & (mid[:n, 1] > 0.75)  # the two at (1, 1)
+    twice = refine_twice(geo, np.flatnonzero(origin | far), np.flatnonzero(origin))
+    assert twice.num_cells() < refine_twice(geo, np.flatnonzero(origin | far)).num_cells()
+    owned = twice.mesh.topology.index_map(2).size_local  # each cell counted once over the ranks
+    x = twice.mesh.geometry.x[twice.mesh.geometry.dofmap.array.reshape(-1, 3)[:owned]][:, :, :2]
+    area = 0.5 * np.abs(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]))
+    at_origin = np.all(x.max(axis=1) <= 0.25 + 1e-12, axis=1)
+    at_far = np.all(x.min(axis=1) >= 0.75 - 1e-12, axis=1)
+    assert comm.allreduce(int(at_origin.sum()), op=MPI.SUM) == 2 * 16 and np.allclose(area[at_origin], 1 / 32 / 16)
+    assert comm.allreduce(int(at_far.sum()), op=MPI.SUM) == 2 * 4 and np.allclose(area[at_far], 1 / 32 / 4)
+
+
 def test_refining_twice_quarters_h_in_the_marked_cells_and_keeps_every_part(comm):
     """refine_twice: the marked cells' children refined again (16 grandchildren of area 1/16 each), the parts kept."""
     from solver.mesh.adapt import refine_twice

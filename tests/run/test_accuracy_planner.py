@@ -33,6 +33,29 @@ def test_the_dorfler_fraction_follows_the_distance_to_the_target():
     assert dorfler_fraction(0.5, 100.0) == THETA_MAX  # far: capped
 
 
+def test_far_from_the_target_the_corners_are_refined_twice_in_a_round(comm, monkeypatch):
+    """A Dörfler round with the estimate over CORNER_RATIO times its target refines the smallest set carrying
+    CORNER_THETA of eta^2 (Example 1's singular corners, a few cells) twice and the rest once; the plan still meets
+    its estimate, and on 2 ranks the plan is the serial one (the sets are marked by global thresholds)."""
+    calls = []
+    twice = planner.refine_twice
+
+    def recorded(geo, cells, again=None):
+        calls.append((comm.allreduce(len(cells)), None if again is None else comm.allreduce(len(again))))
+        return twice(geo, cells, again)
+
+    monkeypatch.setattr(planner, "refine_twice", recorded)
+    p = _plan(comm, 1e-3)
+    assert p.estimate.total <= 1e-3
+    corners = [(n, m) for n, m in calls if m is not None]
+    assert corners and all(0 < m < n for n, m in corners)
+    if comm.size > 1:
+        monkeypatch.setattr(planner, "refine_twice", twice)
+        serial = _plan(MPI.COMM_SELF, 1e-3)
+        assert (p.k, p.geo.num_cells()) == (serial.k, serial.geo.num_cells())
+        assert math.isclose(p.estimate.total, serial.estimate.total, rel_tol=1e-8)
+
+
 def test_a_scene_without_a_tolerance_is_not_planned(comm):
     with pytest.raises(ValueError, match="no accuracy.tolerance"):
         plan(_short(), comm, log=lambda *a: None)

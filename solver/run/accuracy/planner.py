@@ -12,7 +12,8 @@ space part, the rest the time part). In order:
    meshes extrapolate the dofs each needs, times its cost per dof (``constants``);
 3. u's mesh (:meth:`Planner._mesh`): Dörfler refinement until C eta, times the indicator's growth over the run,
    is within its part; the solves are those of a :class:`solves.SpaceProbe` (the t = 0 problem, or coarse-step
-   runs to the level of largest indicator where it grows more than GROWTH_AT_0);
+   runs to the level of largest indicator where it grows more than GROWTH_AT_0); far from the target a round refines
+   the few cells that carry most of eta^2 (singular corners) twice (CORNER_RATIO, CORNER_THETA).
    Each solve starts from the previous mesh's solution; on the way the estimator's constant is calibrated on the
    scene (:mod:`calibration`) and zeta's part measured on a mesh about an eighth of the final one, u then aiming at
    what it leaves of the share;
@@ -63,7 +64,9 @@ ROOM_ZETA_MAX = 0.6
 ROOM_MARGIN = 0.25
 # zeta's part is measured on the adaptive sequence's mesh once the mesh u needs is predicted within ZETA_PROBE_RATIO
 # times its cells (runs at the pilots' coarsest step on a mesh about an eighth of the final one; on Example 1 at 1e-4 a
-# thirtieth gave a bound of 2.1e-5 where an eighth gave 1.6e-6, and the tighter target for u cost more than it saved)
+# thirtieth gave a bound of 2.1e-5 where an eighth gave 1.6e-6, and the tighter target for u cost more than it saved;
+# a sixteenth, the 2,194-cell mesh, gave 4.7e-6: zeta's runs cost about a third less, u's mesh grew from 8,868 cells and
+# 48 steps to 9,272 and 49, and the run paid about what the planning saved)
 ZETA_PROBE_RATIO = 8.0
 # the estimator's constant is calibrated on the scene (:func:`calibration.calibrate`) on the sequence's first mesh whose
 # predicted final mesh is within CALIBRATE_RATIO times its cells (its uniform refinement: a thirtieth of the final mesh)
@@ -81,6 +84,14 @@ MORE_STEPS_ADAPTIVE = 0.1
 # only 1.2-1.6-fold each round on Example 1 (8,495 -> 8,569 -> 8,666 -> 8,742 P2 cells, one factorization of the
 # whole mesh each), and refining its children too adds some hundred cells
 SMALL_SET = 0.02
+# far from the target (an estimate over CORNER_RATIO times it, so that one halving of eta cannot reach it), the
+# smallest set carrying CORNER_THETA of eta^2, where it is at most SMALL_SET of the cells (the singular corners), is
+# refined twice in the round and the rest of the Dörfler set once: one such round cut eta 2.5-3.1-fold on Example 1
+# where a plain round cut it 1.95-2.0-fold, and at 1e-4 the sequence went ... 4,260 -> 8,495 -> 8,868 cells (two
+# factorizations of 35,000 dofs) and now ... 4,288 -> 9,148 (one); with CORNER_THETA 0.3 or 0.6 the last round
+# overshot and took one more (14,141 and 12,261 cells), with 0.5 it ended at 9,997
+CORNER_RATIO = 2.0
+CORNER_THETA = 0.4
 
 
 def dorfler_fraction(theta: float, ratio: float) -> float:
@@ -478,6 +489,10 @@ class Planner:
         def refined(mesh: Geometry, cells: np.ndarray) -> Geometry:
             fraction = dorfler_fraction(theta, seq[-1].estimate / target)
             marked = np.flatnonzero(dorfler(cells, fraction, self.comm))
+            if mesh.dim == 2 and seq[-1].estimate > CORNER_RATIO * target:
+                corners = np.flatnonzero(dorfler(cells, CORNER_THETA, self.comm))
+                if self.comm.allreduce(len(corners), op=MPI.SUM) <= SMALL_SET * mesh.num_cells():
+                    return refine_twice(mesh, marked, corners)
             if mesh.dim == 2 and self.comm.allreduce(len(marked), op=MPI.SUM) <= SMALL_SET * mesh.num_cells():
                 return refine_twice(mesh, marked)
             return refine(mesh, marked)

@@ -103,7 +103,7 @@ def solve_largest_level(cfg: Config, comm: MPI.Comm, geo: Geometry) -> LevelSolv
         est = estimator_for(model)
         largest, largest_cells = -1.0, None
         try:
-            for _ in levels(model):
+            for _ in levels(model, diagnostics=False):
                 cells = est.cells()
                 indicator = est.total(cells)
                 if indicator > largest:
@@ -137,7 +137,7 @@ def pilot_run(cfg: Config, comm: MPI.Comm, geo: Geometry | None, indicator: bool
         model.u.x.array[:] = start
     est = estimator_for(model) if indicator else None
     out = PilotRun(model)
-    for row in levels(model):
+    for row in levels(model, diagnostics=False):
         out.t.append(row["t"])
         out.newton.append(row["newton_iterations"])
         out.u.append(model.u.x.array.copy())
