@@ -715,8 +715,11 @@ class XDMFSeries:
 
     # ------------------------------------------------------------------ writing
 
-    def write(self, t: float, values: Mapping[str, np.ndarray]) -> None:
-        """Append level ``t`` with every field's owned rows (collective)."""
+    def write(self, t: float, values: Mapping[str, np.ndarray], left: int | None = None) -> None:
+        """Append level ``t`` with every field's owned rows (collective). ``left``: the levels the series will be
+        given up to its next :meth:`flush` or :meth:`close`, this one included (None: not known). A chunk opened
+        with this level then holds at most that many, so that it is full when the flush closes it, and is not
+        written a second time as the file of fewer levels (the same file, written once)."""
         if self.closed:
             raise RuntimeError("write() after close()")
         parts = []
@@ -733,7 +736,7 @@ class XDMFSeries:
             del buf
         else:  # one process: each field's own rows, no level buffer
             recv = parts
-        self._collective(lambda: self._write_level(float(t), recv))
+        self._collective(lambda: self._write_level(float(t), recv, left))
 
     def flush(self) -> None:
         """List every level written so far: close the open chunk and replace the XML (collective).
@@ -762,13 +765,15 @@ class XDMFSeries:
                     pos += len(r) * f.ncomp
         return self._take
 
-    def _write_level(self, t: float, recv: np.ndarray | list[np.ndarray]) -> None:
-        """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
+    def _write_level(self, t: float, recv: np.ndarray | list[np.ndarray], left: int | None = None) -> None:
+        """Rank 0: a level into the open chunk (a new chunk if none is open, of at most ``left`` levels); a full chunk
+        is listed at once."""
         self._raise_error()
         try:
             if self.chunk is None:
                 first = len(self.grids)
-                self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, self._chunk_slots(),
+                slots = self._chunk_slots() if left is None else max(1, min(self._chunk_slots(), left))
+                self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, slots,
                                     self._template)
             self.chunk.add(t, recv, self._rows(), self._grid_format)
         except Exception as exc:
