@@ -31,7 +31,9 @@ levels of chunk files that were written completely and will not be written again
   template gives (see *Cost*); it is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at
   every :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at :meth:`XDMFSeries.close`
   (a chunk closed before it is full is written again as the file of its levels only, beside it, and renamed over
-  it), and only after that are its levels listed. A kill before leaves at most an unlisted file. No HDF5 file is
+  it; a run says how many levels it writes up to its next checkpoint or its end, ``write(..., left)``, and a chunk
+  opened then holds no more, so that it is full when closed and written once), and only after that are its levels
+  listed. A kill before leaves at most an unlisted file. No HDF5 file is
   ever open for writing on disk, and a listed file is only ever read.
 - *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
   ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
