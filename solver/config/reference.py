@@ -84,7 +84,8 @@ MEANING: dict[str, str] = {
     "damage.clip": "clip the nodal damage to [zeta*, 1] after each step",
     "solver.rtol": "relative tolerance of the displacement iteration",
     "solver.max_it": "iteration limit of the displacement solve per level",
-    "solver.linear": "linear solver (auto: chosen on the mesh, the number of ranks and, in 3-D, the number of steps)",
+    "solver.linear": ("linear solver (auto: chosen on the mesh, the number of ranks and, in 3-D, the number of steps; "
+                      "cholmod: SuiteSparse's Cholesky for the displacement, petsc where PETSc lacks it)"),
     "solver.method": "displacement method for the contact nonlinearity (auto: Newton until a level takes 8, then newton_condensed)",
     "solver.penalty_duality_omega": "penalty-duality parameter: omega = value / mu",
     "solver.damage_scheme": "time scheme of the damage equation",

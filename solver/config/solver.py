@@ -12,7 +12,7 @@ METHODS = ("auto", "newton", "newton_energy", "newton_condensed", "penalty_duali
 # Newton steps on J: any dimension, any linear solver, any memory rule
 NEWTON_METHODS = ("auto", "newton", "newton_energy", "newton_condensed")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
-LINEAR = ("auto", "petsc", "mumps", "redundant", "iterative")
+LINEAR = ("auto", "petsc", "cholmod", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
 
 
@@ -28,8 +28,9 @@ class SolverConfig:
     up to damped_newton.FALLBACK_IT_FACTOR * max_it iterations (with ``auto``: by newton_condensed, and so are the later
     levels); false: such a level fails at ``max_it``.
 
-    ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D PETSc's
-    sequential Cholesky on one process, redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below
+    ``linear = "auto"`` is resolved on the mesh and the run's length (linear.choose_linear): in 2-D CHOLMOD's
+    sequential Cholesky on one process for the displacement (PETSc's where PETSc lacks SuiteSparse, and for the
+    damage), PETSc's redundant on up to 4 ranks, MUMPS beyond; in 3-D MUMPS below
     linear.AUTO_ITERATIVE_DOFS_3D = 60,000 displacement dofs for a run of 20 steps or more, the iterative solver
     for shorter runs from 10,000 dofs and for every run from 60,000 (benchmarks/results/auto_rule.md)."""
 
@@ -70,7 +71,7 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
     if linear == "iterative" and method not in NEWTON_METHODS:
         # their loops factor one matrix once and re-solve it many times: a direct solve is what they need
         raise ctx.fail("solver.linear", linear, f"needs solver.method = 'newton' (not {method!r}); "
-                       "use a direct solver: auto, petsc, mumps or redundant")
+                       "use a direct solver: auto, petsc, cholmod, mumps or redundant")
     if method not in NEWTON_METHODS and has_contact and scene["dim"] != 2:
         raise ctx.fail("solver.method", method, "available for 2-D meshes only; use 'newton'")
     curved = [b for b in scene["boundary"] if b.role == "contact" and not b.contact_law.piecewise_linear]

@@ -32,10 +32,18 @@ from solver.io.files import on_rank0
 NAME = layout.CHECKPOINT
 
 
+_HASHED: list[tuple[Config, str]] = []  # the last scene hashed and its hash (a Config is frozen)
+
+
 def scene_hash(cfg: Config) -> str:
-    """Hash of everything that defines the solution (not where or how often it is written)."""
+    """Hash of everything that defines the solution (not where or how often it is written). The last scene's hash
+    is kept: a run writes a checkpoint every ``checkpoint_every`` levels, and the scene's text takes tens of ms."""
+    if _HASHED and _HASHED[0][0] is cfg:
+        return _HASHED[0][1]
     text = fingerprint(replace(cfg, output=OutputConfig(), source=""))
-    return hashlib.sha256(text.encode()).hexdigest()
+    digest = hashlib.sha256(text.encode()).hexdigest()
+    _HASHED[:] = [(cfg, digest)]
+    return digest
 
 
 def _keys(coords: np.ndarray) -> np.ndarray:

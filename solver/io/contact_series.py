@@ -72,12 +72,12 @@ class ContactSeries:
         self.series = XDMFSeries(directory, layout, specs, precision, keep_until, name=NAME)
         self._u_index: tuple | None = None  # (u's space, its owned Γ_C nodes' entries in u.x.array, components)
 
-    def write(self, t: float) -> None:
-        """Level t (collective)."""
+    def write(self, t: float, left: int | None = None) -> None:
+        """Level t (collective); ``left`` as for :meth:`XDMFSeries.write`."""
         values = {name: np.take(getattr(self.traces, ATTRIBUTES[name]).x.array, self.node_dof) for name in FIELDS}
         u: fem.Function = self.displacement()
         values["displacement"] = vector3(self._displacement_rows(u))
-        self.series.write(t, values)
+        self.series.write(t, values, left)
 
     def _displacement_rows(self, u: fem.Function) -> np.ndarray:
         """u's rows at Γ_C's owned nodes (one take through an index made once per function space)."""

@@ -257,11 +257,13 @@ class Outputs:
                 values[rows] = block[name]
         return out
 
-    def write(self, t: float) -> None:
-        """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays)."""
+    def write(self, t: float, left: int | None = None) -> None:
+        """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays).
+        ``left``: the levels written up to the next flush or close, this one included (None: not known; see
+        :meth:`XDMFSeries.write`)."""
         if self.contact is not None:
             try:
-                self.contact.write(t)
+                self.contact.write(t, left)
             except SeriesError as exc:
                 raise OutputError(str(exc), exc.t) from None
         if self.series is None:
@@ -277,7 +279,7 @@ class Outputs:
                 values[name] = (tensor6(cells[name], self.d, cells.get(name + "_zz")) if name in ("stress", "elastic_stress")
                                 else cells[name])
         try:
-            self.series.write(t, values)
+            self.series.write(t, values, left)
         except SeriesError as exc:
             raise OutputError(str(exc), exc.t) from None
 

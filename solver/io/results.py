@@ -28,7 +28,7 @@ from solver.io.layout import ResultsDir, timeseries_columns
 from solver.io.timeseries import CSVWriter
 from solver.run.adaptive import StepController, output_times
 from solver.run.model import Model
-from solver.run.stepper import levels, writes_level
+from solver.run.stepper import levels, writes_level, written_levels
 
 
 def run(model: Model, outdir: Path | None = None, on_step: Callable[[dict], None] | None = None,
@@ -98,6 +98,7 @@ class _Writers:
         cfg, comm = model.cfg, model.comm
         self.comm, self.steps, self.every = comm, cfg.time.steps, cfg.output.every
         self.marks = set(output_times(cfg)) if cfg.time.adaptive else set()  # the times an adaptive run writes
+        self.adaptive = cfg.time.adaptive  # its levels are not the scene's steps: its chunks sized as before
         files = ResultsDir(outdir) if outdir is not None else None
         if files is not None:
             fit = model.history.kernel_fit if model.history is not None else None
@@ -116,13 +117,20 @@ class _Writers:
         to the row."""
         n, t0 = row["step"], time.perf_counter()
         if writes_level(n, n if last else -1, self.every) or row["t"] in self.marks:
-            self.out.write(row["t"])
+            self.out.write(row["t"], None if self.adaptive else self.left(n))
             if self.profile is not None:
                 self.profile.write(n, row["t"])
         row["time_output"] = time.perf_counter() - t0
         row["wall_time"] += row["time_output"]
         if self.csv is not None:
             on_rank0(self.comm, lambda: self.csv.write(row))
+
+    def left(self, n: int) -> int:
+        """The levels written from level n (a written one) to the next checkpoint (its flush) or the run's last
+        level, both included: a chunk of the series opened at n is then full when that flush closes it."""
+        k = self.every_ckpt
+        stop = min(-(-n // k) * k, self.steps) if k else self.steps
+        return written_levels(n, stop, self.steps, self.every)
 
     def close(self, finished: bool) -> None:
         self.out.close(quiet=not finished)

@@ -31,7 +31,9 @@ levels of chunk files that were written completely and will not be written again
   template gives (see *Cost*); it is closed when it holds ``MAX_LEVELS_PER_CHUNK`` levels or ``CHUNK_BYTES``, at
   every :meth:`XDMFSeries.flush` (the stepper calls it before each checkpoint) and at :meth:`XDMFSeries.close`
   (a chunk closed before it is full is written again as the file of its levels only, beside it, and renamed over
-  it), and only after that are its levels listed. A kill before leaves at most an unlisted file. No HDF5 file is
+  it; a run says how many levels it writes up to its next checkpoint or its end, ``write(..., left)``, and a chunk
+  opened then holds no more, so that it is full when closed and written once), and only after that are its levels
+  listed. A kill before leaves at most an unlisted file. No HDF5 file is
   ever open for writing on disk, and a listed file is only ever read.
 - *XML.* ``solution.xdmf`` is never modified in place: the whole file is written to
   ``.solution.xdmf.tmp`` in the same directory and renamed over it (``os.replace``,
@@ -715,8 +717,11 @@ class XDMFSeries:
 
     # ------------------------------------------------------------------ writing
 
-    def write(self, t: float, values: Mapping[str, np.ndarray]) -> None:
-        """Append level ``t`` with every field's owned rows (collective)."""
+    def write(self, t: float, values: Mapping[str, np.ndarray], left: int | None = None) -> None:
+        """Append level ``t`` with every field's owned rows (collective). ``left``: the levels the series will be
+        given up to its next :meth:`flush` or :meth:`close`, this one included (None: not known). A chunk opened
+        with this level then holds at most that many, so that it is full when the flush closes it, and is not
+        written a second time as the file of fewer levels (the same file, written once)."""
         if self.closed:
             raise RuntimeError("write() after close()")
         parts = []
@@ -733,7 +738,7 @@ class XDMFSeries:
             del buf
         else:  # one process: each field's own rows, no level buffer
             recv = parts
-        self._collective(lambda: self._write_level(float(t), recv))
+        self._collective(lambda: self._write_level(float(t), recv, left))
 
     def flush(self) -> None:
         """List every level written so far: close the open chunk and replace the XML (collective).
@@ -762,13 +767,15 @@ class XDMFSeries:
                     pos += len(r) * f.ncomp
         return self._take
 
-    def _write_level(self, t: float, recv: np.ndarray | list[np.ndarray]) -> None:
-        """Rank 0: a level into the open chunk (a new chunk if none is open); a full chunk is listed at once."""
+    def _write_level(self, t: float, recv: np.ndarray | list[np.ndarray], left: int | None = None) -> None:
+        """Rank 0: a level into the open chunk (a new chunk if none is open, of at most ``left`` levels); a full chunk
+        is listed at once."""
         self._raise_error()
         try:
             if self.chunk is None:
                 first = len(self.grids)
-                self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, self._chunk_slots(),
+                slots = self._chunk_slots() if left is None else max(1, min(self._chunk_slots(), left))
+                self.chunk = _Chunk(self.data_dir / f"{self.prefix}levels_{first:06d}.h5", first, slots,
                                     self._template)
             self.chunk.add(t, recv, self._rows(), self._grid_format)
         except Exception as exc:

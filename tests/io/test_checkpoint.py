@@ -20,6 +20,9 @@ def test_scene_hash_ignores_output_settings_only():
     cfg = from_dict(SCENE)
     assert checkpoint.scene_hash(cfg) == checkpoint.scene_hash(replace(cfg, output=OutputConfig(every=7)))
     assert checkpoint.scene_hash(cfg) != checkpoint.scene_hash(from_dict({**SCENE, "material": {"E": 101.0}}))
+    other = from_dict({**SCENE, "material": {"E": 101.0}})
+    first = checkpoint.scene_hash(other)
+    assert checkpoint.scene_hash(other) == first != checkpoint.scene_hash(cfg)  # the kept hash is the same scene's
 
 
 def test_keys_sort_points_by_coordinates():

@@ -458,3 +458,31 @@ def test_a_chunk_closed_early_whose_small_levels_share_parts_is_written_again_wh
     assert len(w._template(25).cut) - 1 < 25  # the case: fewer parts than levels
     check_values(read_series(tmp_path / "solution.xdmf"), times)
     check_values(meshio_read(tmp_path / "solution.xdmf"), times)
+
+
+@pytest.mark.serial
+def test_a_chunk_sized_to_the_levels_left_is_written_once_and_gives_the_same_files(tmp_path, monkeypatch):
+    """``write(..., left)``: a chunk opened with ``left`` levels to go before the next flush or close holds that many,
+    so that it is full when closed and never written again as a file of fewer levels; its files are byte for byte
+    those of the chunks closed early and written again."""
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
+    scene = Scene(MPI.COMM_SELF, n=3)
+    times = [0.25 * i for i in range(9)]
+    flush_at, rewrites = 4, []
+    for name in ("closed_early", "sized"):
+        if name == "sized":
+            monkeypatch.setattr(sx._Chunk, "_rewrite", lambda self, n: rewrites.append(n))
+        w = scene.series(tmp_path / name)
+        for i, t in enumerate(times):
+            stop = flush_at if i <= flush_at else len(times) - 1
+            w.write(t, scene.values(t), left=stop - i + 1 if name == "sized" else None)
+            if i == flush_at:
+                w.flush()
+        w.close()
+        check_values(read_series(tmp_path / name / "solution.xdmf"), times)
+    assert rewrites == []  # chunks 3-4 (flushed) and 8 (closed) were full when closed
+    files = sorted(p.name for p in (tmp_path / "sized" / "fields").iterdir())
+    assert files == ["levels_000000.h5", "levels_000003.h5", "levels_000005.h5", "levels_000008.h5", "mesh.h5"]
+    for f in files:
+        assert (tmp_path / "sized" / "fields" / f).read_bytes() == (tmp_path / "closed_early" / "fields" / f).read_bytes()
+    assert (tmp_path / "sized" / "solution.xdmf").read_bytes() == (tmp_path / "closed_early" / "solution.xdmf").read_bytes()

@@ -22,6 +22,40 @@ def test_writes_level():
     assert all(writes_level(n, 10, 1) for n in range(11))
 
 
+def test_written_levels_counts_what_writes_level_writes():
+    from solver.run.stepper import written_levels
+
+    for steps in (0, 1, 7, 10, 100):
+        for every in (0, 1, 3, 7, 100):
+            for first in range(steps + 1):
+                for last in range(first - 1, steps + 1):
+                    expected = sum(writes_level(n, steps, every) for n in range(first, last + 1))
+                    assert written_levels(first, last, steps, every) == expected, (steps, every, first, last)
+
+
+@pytest.mark.parametrize("every", [1, 3])
+def test_a_run_sizes_its_chunks_to_the_checkpoints_and_writes_each_once(comm, tmp_path_factory, monkeypatch, every):
+    """A chunk of the series opened at a level holds the levels written up to the next checkpoint (whose flush
+    closes it) or the last level: none is closed early and written again, and every level is listed."""
+    import solver.io.xdmf as sx
+    from solver.post.results import read_results
+
+    rewrites = []
+    monkeypatch.setattr(sx, "MAX_LEVELS_PER_CHUNK", 3)
+    monkeypatch.setattr(sx._Chunk, "_rewrite", lambda self, n: rewrites.append(n))
+    out = tmp_path_factory.mktemp("chunks") if comm.rank == 0 else None
+    out = comm.bcast(out, root=0)
+    cfg = from_dict({"mesh": {"nx": 4, "ny": 4}, "time": {"T": 1.0, "k": 0.1},
+                     "output": {"every": every, "checkpoint_every": 4}})
+    from solver.io.layout import prepare
+
+    prepare(comm, out / "run")
+    solve(cfg, comm, out / "run")
+    assert rewrites == []
+    written = [n for n in range(11) if writes_level(n, 10, every)]
+    assert read_results(out / "run")["times"] == pytest.approx([0.1 * n for n in written])
+
+
 def test_a_step_commits_the_memory_of_the_previous_level_first(comm):
     """Level 1 uses M_1 = k g(k) H(u_0, zeta_0): the history is formed from level 0 before the damage moves."""
     model = build_model(from_dict(SCENE), comm)

@@ -79,7 +79,64 @@ def test_iterative_options_tie_the_krylov_tolerance_to_newton():
     assert opts["ksp_norm_type"] == "unpreconditioned" and float(opts["ksp_atol"]) == 0.0
     assert iterative_options(1e-8, elasticity=False, symmetric=False)["ksp_type"] == "gmres"
     assert linear_options(MPI.COMM_WORLD, "iterative", True, 1e-8, elasticity=False)["pc_type"] == "jacobi"
-    assert linear_options(MPI.COMM_WORLD, "auto", True, 1e-8, elasticity=True) == direct_options(MPI.COMM_WORLD, "auto")
+    assert linear_options(MPI.COMM_WORLD, "auto", True, 1e-8, elasticity=True) == direct_options(MPI.COMM_WORLD, "auto",
+                                                                                                 cholmod=True)
+
+
+def test_cholmod_factors_the_displacement_only_and_falls_back_to_petsc(monkeypatch):
+    """CHOLMOD for the displacement's symmetric J on one process; the damage (elasticity=False), an unsymmetric J,
+    more ranks (redundant) and a PETSc without SuiteSparse keep PETSc's own factorization."""
+    from solver.solvers import linear
+    from solver.solvers.linear import has_cholmod, linear_options
+
+    petsc = direct_options(MPI.COMM_SELF, "petsc")
+    if has_cholmod():
+        assert linear_options(MPI.COMM_SELF, "cholmod", True, 1e-8, elasticity=True)["pc_factor_mat_solver_type"] == \
+            "cholmod"
+        assert direct_options(MPI.COMM_SELF, "auto", cholmod=True)["pc_factor_mat_solver_type"] == "cholmod"
+    assert linear_options(MPI.COMM_SELF, "cholmod", True, 1e-8, elasticity=False) == petsc  # the damage's
+    assert direct_options(MPI.COMM_SELF, "auto") == petsc  # the damage's under auto
+    assert direct_options(MPI.COMM_SELF, "cholmod", symmetric=False, cholmod=True) == \
+        direct_options(MPI.COMM_SELF, "petsc", symmetric=False)
+    monkeypatch.setattr(linear, "has_cholmod", lambda: False)
+    assert linear.choose_linear("auto", MPI.COMM_SELF, 2, 1000) == "petsc"
+    assert direct_options(MPI.COMM_SELF, "cholmod", cholmod=True) == petsc
+
+
+@pytest.mark.parametrize("other", ["petsc", "mumps"])
+def test_cholmod_gives_petscs_and_mumps_results(comm, other):
+    """Example 1 (contact, memory, damage; 11 levels) on CHOLMOD's factorization equals the same run on PETSc's and
+    on MUMPS's to the solver's tolerance (rtol 1e-10 of the residual: 1e-9 of the displacement's scale here); on 2
+    ranks ``cholmod`` is PETSc's redundant solve."""
+    from conftest import ROOT, solve
+
+    from solver.config import load
+
+    def by_point(f) -> np.ndarray:
+        """f's owned nodal values of every rank, ordered by the nodes' coordinates (partitions may differ)."""
+        V = f.function_space
+        bs, n = V.dofmap.index_map_bs, V.dofmap.index_map.size_local
+        x = np.round(V.tabulate_dof_coordinates()[:n], 12)
+        values = f.x.array[: n * bs].reshape(n, bs)
+        x, values = np.concatenate(comm.allgather(x)), np.concatenate(comm.allgather(values))
+        return values[np.lexsort(x.T[::-1])]
+
+    def run(linear: str):
+        cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=12", "mesh.ny=12", "time.k=0.1",
+                                                     f"solver.linear='{linear}'"])
+        model, rows = solve(cfg, comm)
+        return by_point(model.u), by_point(model.damage.zeta), list(rows)
+
+    u, zeta, rows = run("cholmod")
+    u2, zeta2, rows2 = run(other)
+    scale = np.abs(u).max()
+    assert scale > 1e-3
+    assert np.abs(u - u2).max() <= 1e-9 * scale
+    assert np.abs(zeta - zeta2).max() <= 1e-9
+    assert len(rows) == len(rows2) == 11
+    for a, b in zip(rows, rows2):
+        for key in ("contact_force", "contact_length", "strain_norm", "zeta_min", "zeta_norm"):
+            assert a[key] == pytest.approx(b[key], rel=1e-9, abs=1e-12), key
 
 
 SMALL_3D = ["--set", "mesh.nx=4", "--set", "mesh.ny=4", "--set", "mesh.nz=4", "--set", "time.k=0.1", "--no-progress"]
@@ -169,10 +226,12 @@ def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_and_steps_in_3d():
         AUTO_ITERATIVE_DOFS_3D,
         AUTO_SHORT_RUN_DOFS_3D,
         choose_linear,
+        has_cholmod,
     )
 
     big = 10 * AUTO_ITERATIVE_DOFS_3D
-    for size, expected in ((1, "petsc"), (2, "redundant"), (4, "redundant"), (5, "mumps")):
+    one = "cholmod" if has_cholmod() else "petsc"
+    for size, expected in ((1, one), (2, "redundant"), (4, "redundant"), (5, "mumps")):
         for steps in (None, 1, 1000):
             assert choose_linear("auto", _Size(size), 2, big, steps=steps) == expected  # 2-D: as before
         assert direct_options(_Size(size), "auto") == direct_options(_Size(size), expected)
@@ -188,7 +247,7 @@ def test_auto_keeps_the_2d_direct_choice_and_picks_by_size_and_steps_in_3d():
         assert pick(AUTO_ITERATIVE_DOFS_3D, long) == pick(AUTO_ITERATIVE_DOFS_3D, None) == "iterative"
         assert pick(big, long, method="newton_energy") == "iterative"
         assert pick(big, short, method="fixed_point") == "mumps"  # re-solves one factor
-    for kind in ("petsc", "mumps", "redundant", "iterative"):  # a named solver is never replaced
+    for kind in ("petsc", "cholmod", "mumps", "redundant", "iterative"):  # a named solver is never replaced
         assert choose_linear(kind, _Size(1), 3, 10) == choose_linear(kind, _Size(1), 2, big) == kind
 
 
