@@ -9,7 +9,8 @@ the ratio this / base of each round's seconds printed (median and range). Cases:
 (0, 1)² pushed 0.005 onto g = x²/2, mu = 1e-8) at P1 n = 200 and P2 n = 100; the 3-D sphere (radius 2 pressed
 0.015 into the quarter block (0, 2)³ with symmetry planes, gmsh mesh graded to 0.015 at the contact by
 meshes/hertz3d.py, P1, mu = 1e-8).
-Writes OUT.csv (case, round, tree, iterations, factorizations, contact force, seconds or the failure) and prints it.
+Writes OUT.csv (case, round, tree, iterations, factorizations, contact force, contact length (area in 3-D),
+peak pressure, seconds or the failure) and prints it.
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ def one(scene: dict) -> dict:
     except Exception as exc:  # a failed level is a result here
         return {"failure": str(exc).splitlines()[0][:160], "seconds": time.perf_counter() - t}
     return {"iterations": row["newton_iterations"], "factorizations": row["factorizations"],
-            "contact_force": row["contact_force"], "seconds": time.perf_counter() - t}
+            "contact_force": row["contact_force"], "contact_length": row["contact_length"],
+            "peak_pressure": row.get("peak_pressure", ""), "seconds": time.perf_counter() - t}
 
 
 def main() -> int:
@@ -107,7 +109,8 @@ def main() -> int:
         if ratios:
             print(f"{name}: time this / base median {np.median(ratios):.2f} (range {min(ratios):.2f}-{max(ratios):.2f}, "
                   f"{len(ratios)} rounds)", flush=True)
-    keys = ["case", "round", "tree", "iterations", "factorizations", "contact_force", "seconds", "failure"]
+    keys = ["case", "round", "tree", "iterations", "factorizations", "contact_force", "contact_length", "peak_pressure",
+            "seconds", "failure"]
     with open(f"{args.out}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, keys)
         w.writeheader()
