@@ -21,8 +21,8 @@ stops where ||F|| <= solver.rtol * scale (the solver's test) or after ``--max`` 
 - ``predicted`` / ``predicted_energy``: the solve without contact, then the start lifted by half the largest overlap
   (the zone of Hertz's a^2 = R d, not the overlap's 2 R d), then full steps / steps with the line search.
 
-Writes OUT.csv (h, strategy, solves, converged, residual, contact force, seconds) and prints each solve with
-``--trace``. One process, serial.
+Writes OUT.csv (h, strategy, solves, converged, residual, contact force, seconds; rows of other sizes and strategies
+kept) and OUT.md (its table), and prints each solve with ``--trace``. One process, serial.
 """
 
 from __future__ import annotations
@@ -201,6 +201,15 @@ def main() -> int:
         w.writeheader()
         for r in [*old, *rows]:
             w.writerow({k: r.get(k, "") for k in keys})
+    table = list(csv.DictReader(out.open()))
+    lines = ["# The 3-D sphere's first contact under other Newton strategies", "",
+             "Written by `python benchmarks/first_contact_strategies.py --h H` (its docstring says what each strategy is).",
+             "Solves: Jacobian solves from the level's start (each a factorization; every stage of a path counts), at",
+             "most the run's `--max`; converged: ||F|| <= rtol * scale.", "",
+             "| h | strategy | solves | converged | residual | contact force | seconds |", "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['h']} | {r['strategy']} | {r['solves']} | {r['converged']} | {float(r['residual']):.2e} | "
+              f"{float(r['contact_force']):.10e} | {float(r['seconds']):.0f} |" for r in table]
+    Path(f"{args.out}.md").write_text("\n".join(lines) + "\n")
     return 0
 
 
