@@ -10,7 +10,8 @@ the ratio this / base of each round's seconds printed (median and range). Cases:
 0.015 into the quarter block (0, 2)³ with symmetry planes, gmsh mesh graded to 0.015 at the contact by
 meshes/hertz3d.py, P1, mu = 1e-8).
 Writes OUT.csv (case, round, tree, iterations, factorizations, contact force, contact length (area in 3-D),
-peak pressure, seconds or the failure) and prints it.
+peak pressure, the level's solve time (level_seconds: the row's time_displacement), the process's seconds or the
+failure) and prints it.
 """
 
 from __future__ import annotations
@@ -66,7 +67,8 @@ def one(scene: dict) -> dict:
         return {"failure": str(exc).splitlines()[0][:160], "seconds": time.perf_counter() - t}
     return {"iterations": row["newton_iterations"], "factorizations": row["factorizations"],
             "contact_force": row["contact_force"], "contact_length": row["contact_length"],
-            "peak_pressure": row.get("peak_pressure", ""), "seconds": time.perf_counter() - t}
+            "peak_pressure": row.get("peak_pressure", ""), "level_seconds": row["time_displacement"],
+            "seconds": time.perf_counter() - t}
 
 
 def main() -> int:
@@ -103,14 +105,15 @@ def main() -> int:
                     "failure": done.stderr.strip().splitlines()[-1:]}
                 rows.append({"case": name, "round": k, "tree": tree, **out})
                 print(rows[-1], flush=True)
-        seconds = {(r["round"], r["tree"]): r.get("seconds") for r in rows if r["case"] == name}
-        ratios = [seconds[k, "this"] / seconds[k, "base"] for k in range(args.rounds)
-                  if seconds.get((k, "base")) and seconds.get((k, "this"))]
-        if ratios:
-            print(f"{name}: time this / base median {np.median(ratios):.2f} (range {min(ratios):.2f}-{max(ratios):.2f}, "
-                  f"{len(ratios)} rounds)", flush=True)
+        for column in ("seconds", "level_seconds"):
+            seconds = {(r["round"], r["tree"]): r.get(column) for r in rows if r["case"] == name}
+            ratios = [seconds[k, "this"] / seconds[k, "base"] for k in range(args.rounds)
+                      if seconds.get((k, "base")) and seconds.get((k, "this"))]
+            if ratios:
+                print(f"{name}: {column} this / base median {np.median(ratios):.2f} (range {min(ratios):.2f}-"
+                      f"{max(ratios):.2f}, {len(ratios)} rounds)", flush=True)
     keys = ["case", "round", "tree", "iterations", "factorizations", "contact_force", "contact_length", "peak_pressure",
-            "seconds", "failure"]
+            "level_seconds", "seconds", "failure"]
     with open(f"{args.out}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, keys)
         w.writeheader()
