@@ -1,13 +1,17 @@
 """First contact's Newton iterations, two trees side by side: the Hertz scenes of docs/model.md §4.
 
-    python benchmarks/first_contact.py --base CHECKOUT_OF_THE_BASE [--only 2d] [--out benchmarks/results/first_contact]
+    python benchmarks/first_contact.py --base CHECKOUT_OF_THE_BASE [--only 2d] [--rounds N] [--out benchmarks/results/first_contact]
 
 Each case's first level (t = 0, the elastic contact problem) is solved under the default settings (``auto``) by
 each tree in its own process (``one`` below, run with that tree on PYTHONPATH), base then this tree, case after
-case, on the same machine in the same run. Cases: Hertz line contact (a half block (0, 1)² pushed 0.005 onto
-g = x²/2, mu = 1e-8) at P1 n = 200 and P2 n = 100; the 3-D sphere (radius 2 pressed 0.015 into the quarter block
-(0, 2)³ with symmetry planes, gmsh mesh graded to 0.015 at the contact by meshes/hertz3d.py, P1, mu = 1e-8).
-Writes OUT.csv (case, tree, iterations, factorizations, contact force, seconds or the failure) and prints it.
+case, on the same machine in the same run; with ``--rounds N`` N times, the trees' order swapped every round, and
+the ratio this / base of each round's seconds printed (median and range). Cases: Hertz line contact (a half block
+(0, 1)² pushed 0.005 onto g = x²/2, mu = 1e-8) at P1 n = 200 and P2 n = 100; the 3-D sphere (radius 2 pressed
+0.015 into the quarter block (0, 2)³ with symmetry planes, gmsh mesh graded to 0.015 at the contact by
+meshes/hertz3d.py, P1, mu = 1e-8).
+Writes OUT.csv (case, round, tree, iterations, factorizations, contact force, contact length (area in 3-D),
+peak pressure, the level's solve time (level_seconds: the row's time_displacement), the process's seconds or the
+failure) and prints it.
 """
 
 from __future__ import annotations
@@ -62,7 +66,9 @@ def one(scene: dict) -> dict:
     except Exception as exc:  # a failed level is a result here
         return {"failure": str(exc).splitlines()[0][:160], "seconds": time.perf_counter() - t}
     return {"iterations": row["newton_iterations"], "factorizations": row["factorizations"],
-            "contact_force": row["contact_force"], "seconds": time.perf_counter() - t}
+            "contact_force": row["contact_force"], "contact_length": row["contact_length"],
+            "peak_pressure": row.get("peak_pressure", ""), "level_seconds": row["time_displacement"],
+            "seconds": time.perf_counter() - t}
 
 
 def main() -> int:
@@ -73,6 +79,7 @@ def main() -> int:
     parser.add_argument("--base", help="a checkout of the base tree")
     parser.add_argument("--only", nargs="*", default=[], help="cases whose name contains one of these")
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "first_contact"))
+    parser.add_argument("--rounds", type=int, default=1, help="rounds, the trees' order swapped every round")
     args = parser.parse_args()
     if args.cmd == "one":
         print(json.dumps(one(json.loads(Path(args.scene).read_text()))))
@@ -89,15 +96,24 @@ def main() -> int:
             continue
         path = work / f"{name}.json"
         path.write_text(json.dumps(scene))
-        for tree, src in trees:
-            env = {**os.environ, "PYTHONPATH": str(src)}
-            done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "one", str(path)], env=env,
-                                  cwd=src, capture_output=True, text=True)
-            out = json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else {
-                "failure": done.stderr.strip().splitlines()[-1:]}
-            rows.append({"case": name, "tree": tree, **out})
-            print(rows[-1], flush=True)
-    keys = ["case", "tree", "iterations", "factorizations", "contact_force", "seconds", "failure"]
+        for k in range(args.rounds):
+            for tree, src in (trees if k % 2 == 0 else trees[::-1]):
+                env = {**os.environ, "PYTHONPATH": str(src)}
+                done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "one", str(path)], env=env,
+                                      cwd=src, capture_output=True, text=True)
+                out = json.loads(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else {
+                    "failure": done.stderr.strip().splitlines()[-1:]}
+                rows.append({"case": name, "round": k, "tree": tree, **out})
+                print(rows[-1], flush=True)
+        for column in ("seconds", "level_seconds"):
+            seconds = {(r["round"], r["tree"]): r.get(column) for r in rows if r["case"] == name}
+            ratios = [seconds[k, "this"] / seconds[k, "base"] for k in range(args.rounds)
+                      if seconds.get((k, "base")) and seconds.get((k, "this"))]
+            if ratios:
+                print(f"{name}: {column} this / base median {np.median(ratios):.2f} (range {min(ratios):.2f}-"
+                      f"{max(ratios):.2f}, {len(ratios)} rounds)", flush=True)
+    keys = ["case", "round", "tree", "iterations", "factorizations", "contact_force", "contact_length", "peak_pressure",
+            "level_seconds", "seconds", "failure"]
     with open(f"{args.out}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, keys)
         w.writeheader()

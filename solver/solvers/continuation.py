@@ -18,7 +18,10 @@ close; the level's solution is that of the last stage, the stiff law's, to the s
 
 A first contact that plain Newton settles at once (the shipped scenes' first levels: 3 iterations) needs no path,
 which would cost it 4 more: plain Newton runs first for FIRST_STEPS iterations, and the path starts from where it
-stands only where they did not solve the level.
+stands only where they did not solve the level. It starts after DECIDE_STEPS iterations already where the zone has
+begun to shrink (:class:`ZoneShrinks`: fewer rows of C at the second iterate than at the first): that is the slow
+mode the path is for (the zone of the solve without contact closing by a point a step), where the shipped scenes'
+first levels keep their zone from the first iterate to the second and are settled by the third.
 
 The stiffness ratio R is :func:`contact_stiffness_ratio` (the largest over Gamma_C's nodes); a stage's s is its ratio
 over R. The path is taken with the linear law only (where it was measured): on Example 1's limited-penetration
@@ -38,6 +41,7 @@ from solver.physics.displacement import DisplacementProblem
 RATIOS = (1.0, 10.0, 100.0)
 FIRST_STEPS = 3  # plain Newton's iterations on a first contact before the path is taken (from where they end)
 STAGE_ITERATIONS = 2  # Newton steps of a stage before s grows (its residual need not meet the tolerance)
+DECIDE_STEPS = 2  # plain Newton's iterations after which a shrinking zone takes the path at once (ZoneShrinks)
 STIFF = 10.0 * RATIOS[-1]  # a contact stiffer than this (ratio R) gets the path on a first contact
 
 
@@ -82,3 +86,32 @@ class ComplianceContinuation:
         contact = self.problem.contact
         contact.scale.value = PETSc.ScalarType(s)
         contact.forget()
+
+
+def contact_rows(problem: DisplacementProblem) -> int:
+    """The rows of the contact Jacobian C at the current u (the dofs next to a point in contact): the size of the
+    contact zone, from C assembled there (ContactTerm.active_set_at: J and the recorded active set untouched).
+    Collective."""
+    contact = problem.contact
+    contact.active_set_at()
+    diag = contact.C.createVecLeft()
+    contact.C.getDiagonal(diag)
+    local = int(np.count_nonzero(diag.array_r))
+    diag.destroy()
+    return contact.comm.allreduce(local, op=MPI.SUM)
+
+
+class ZoneShrinks:
+    """Plain Newton's early stop on a first contact (module docstring), a test of the iteration number called by
+    :class:`~newton.NewtonTest` at each iterate: True at iteration DECIDE_STEPS where C has fewer rows there than at
+    the first iterate (the solve without contact). Collective."""
+
+    def __init__(self, problem: DisplacementProblem) -> None:
+        self.problem = problem
+        self.rows: list[int] = []  # C's rows at the first iterates
+
+    def __call__(self, it: int) -> bool:
+        if it < 1 or it > DECIDE_STEPS:
+            return False
+        self.rows.append(contact_rows(self.problem))
+        return it == DECIDE_STEPS and self.rows[-1] < self.rows[0]

@@ -28,7 +28,7 @@ from petsc4py import PETSc
 from solver.errors import DisplacementSolveError
 from solver.physics.contact import ContactTerm
 from solver.physics.displacement import DisplacementProblem, SolveInfo
-from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, ComplianceContinuation
+from solver.solvers.continuation import FIRST_STEPS, STAGE_ITERATIONS, ComplianceContinuation, ZoneShrinks
 from solver.solvers.cycle_watch import CONVERGED_SET, CYCLE, DIVERGED_CYCLE, ActiveSetCycleWatch
 from solver.solvers.damped_newton import DampedFallback, has_energy
 from solver.solvers.linear import (
@@ -103,6 +103,9 @@ class NewtonTest:
         # the solve (DIVERGED_DTOL); None: no such test
         self.growth_limit: int | None = None
         self.exact_steps = False  # set by NewtonCore.plain_newton where a kept active set ends the level
+        # where set (a first contact's plain steps: continuation.ZoneShrinks): a test of the iteration number that
+        # stops the solve (DIVERGED_MAX_IT) where it is true; None: no such test
+        self.stop_early: Callable[[int], bool] | None = None
         self._last, self._grown = np.inf, 0
 
     def start_level(self, scale: float) -> None:
@@ -128,7 +131,7 @@ class NewtonTest:
         if self.exact_steps and key is not None and self.near_floor(fnorm) and self.contact.comm.allreduce(
                 key == self.contact.fingerprint(), op=MPI.LAND):
             return CONVERGED_SET
-        if it >= self.max_it:
+        if it >= self.max_it or (self.stop_early is not None and self.stop_early(it)):
             return R.DIVERGED_MAX_IT
         self._grown = self._grown + 1 if (it > 0 and fnorm > self._last) else 0
         self._last = fnorm
@@ -447,18 +450,21 @@ class NewtonSolver(RetriesDirectly, DisplacementMethod):
                             self.fallback.krylov_iterations)
 
     def _first_contact(self) -> tuple[int, np.ndarray, int]:
-        """A first contact: plain Newton for at most FIRST_STEPS iterations, and where that does not solve the
-        level, the compliance path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS
-        steps from the last, then the level's own problem (s = 1) under the level's test. Returns the last run's
-        reason, the residual history (each run's but its last, the last one's whole) and the iterations of all."""
+        """A first contact: plain Newton for at most FIRST_STEPS iterations (DECIDE_STEPS where the zone shrinks and
+        the path is to be taken: continuation.ZoneShrinks), and where that does not solve the level, the compliance
+        path from where it stands (continuation.py): each stage at most STAGE_ITERATIONS steps from the last, then
+        the level's own problem (s = 1) under the level's test. Returns the last run's reason, the residual history
+        (each run's but its last, the last one's whole) and the iterations of all."""
         core, path = self.core, self.continuation
         test, limit = core.test, core.test.max_it
         R = PETSc.SNES.ConvergedReason
         test.max_it = min(FIRST_STEPS, limit)
+        test.stop_early = ZoneShrinks(core.problem) if self.take_path else None
         try:
             reason, first, its = core.plain_newton()
         finally:
             test.max_it = limit
+            test.stop_early = None
         if reason > 0 or reason not in (R.DIVERGED_MAX_IT, DIVERGED_CYCLE) or its >= limit or not self.take_path:
             return reason, first, its
         history = list(first[:its])
