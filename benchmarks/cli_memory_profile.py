@@ -14,8 +14,10 @@ beside it.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import functools
 import gc
+import math
 import os
 import subprocess
 import sys
@@ -45,9 +47,27 @@ def status() -> tuple[float, float]:
     return out["VmRSS"], out["VmHWM"]
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                "arena ordblks smblks hblks hblkhd usmblks fsmblks uordblks fordblks keepcost".split()]
+
+
+def heap() -> tuple[float, float, float]:
+    """glibc's malloc: bytes in use (heap and mmapped) and free in the heap (allocated from the system, not in use:
+    what a later malloc reuses before the resident set grows), MiB; NaN without glibc's mallinfo2."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = _MallInfo2
+        m = libc.mallinfo2()
+    except (OSError, AttributeError):
+        return math.nan, math.nan, math.nan
+    return (m.uordblks + m.hblkhd) / MIB, m.fordblks / MIB, m.hblkhd / MIB
+
+
 def note(label: str) -> None:
     rss, hwm = status()
-    line = f"| {label} | {rss:,.0f} | {hwm:,.0f} |"
+    used, free, _ = heap()
+    line = f"| {label} | {rss:,.0f} | {hwm:,.0f} | {used:,.0f} | {free:,.0f} |"
     if tracemalloc.is_tracing():
         cur, peak = tracemalloc.get_traced_memory()
         line += f" {cur / MIB:,.0f} | {peak / MIB:,.0f} |"
@@ -255,10 +275,11 @@ def main(argv: list[str] | None = None) -> int:
              f"{''.join(f' --set {s}' for s in a.set)}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
              f"commit {commit}, load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}; exit {code}, "
              f"{wall:.0f} s).", "",
-             "Resident set (VmRSS) and its high-water mark (VmHWM) after each stage, MiB"
+             "Resident set (VmRSS) and its high-water mark (VmHWM) after each stage, with glibc malloc's bytes in use and "
+             "free in its heap (mallinfo2: freed memory the process keeps and reuses), MiB"
              + (" (tracemalloc: numpy's and Python's allocations, current and peak)" if a.trace else "") + ":", "",
-             "| after | VmRSS | VmHWM |" + (" traced | traced peak |" if a.trace else ""),
-             "|---|---|---|" + ("---|---|" if a.trace else ""), *LOG, "",
+             "| after | VmRSS | VmHWM | malloc in use | malloc free |" + (" traced | traced peak |" if a.trace else ""),
+             "|---|---|---|---|---|" + ("---|---|" if a.trace else ""), *LOG, "",
              "What the model holds after the run (reachable arrays and PETSc objects, largest first; a PETSc Mat as 12 B "
              "per allocated entry and 16 B per row; a preconditioner's hierarchy is listed below):", "",
              "| MiB | where | what |", "|---|---|---|",
