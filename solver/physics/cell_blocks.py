@@ -29,8 +29,7 @@ class CellBlockForm:
     """``form`` on ``mesh`` (a linear form whose integrals are all over every cell, ``dx`` with any metadata) as
     one compiled form per block of ``block`` owned cells (default :data:`BLOCK`); any other form, or a mesh of one
     block, stays one form. The number of blocks is the same on every rank (forms are compiled collectively): a rank
-    with fewer cells has empty blocks."""``form`` on ``mesh`` (a linear form whose integrals are all over every cell, ``dx`` with any metadata) as one compiled
-    form per block of ``block`` owned cells (default :data:`BLOCK`); any other form, or a mesh of one block, stays one form. The number of
+    with fewer cells has empty blocks."""
     blocks is the same on every rank (forms are compiled collectively): a rank with fewer cells has empty blocks."""
 
     def __init__(self, mesh: dmesh.Mesh, form: ufl.Form, block: int | None = None) -> None:
