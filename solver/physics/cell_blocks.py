@@ -30,7 +30,6 @@ class CellBlockForm:
     one compiled form per block of ``block`` owned cells (default :data:`BLOCK`); any other form, or a mesh of one
     block, stays one form. The number of blocks is the same on every rank (forms are compiled collectively): a rank
     with fewer cells has empty blocks."""
-    blocks is the same on every rank (forms are compiled collectively): a rank with fewer cells has empty blocks."""
 
     def __init__(self, mesh: dmesh.Mesh, form: ufl.Form, block: int | None = None) -> None:
         block = BLOCK if block is None else block
