@@ -3,9 +3,11 @@
 ``python benchmarks/cli_memory_profile.py --n 46 --steps 4`` runs ``solver run configs/example1_3d.toml`` in this
 process (the same ``--set`` as benchmarks/cli_memory.py: iterative solver, k = 0.02, a checkpoint every 2 levels),
 with the set-up's stages (mesh, damage, quadrature rule, memory source, history, mechanics, writers), each level
-and each checkpoint wrapped: after each it prints the resident set (``/proc/self/status`` VmRSS), its high-water
-mark (VmHWM) and, with ``--trace``, tracemalloc's current and peak (numpy's arrays; PETSc's own memory does not
-show there). After the run it lists what the model still holds: every numpy array and scipy sparse matrix
+and each checkpoint wrapped, and each level's parts (memory commit, damage step, displacement solve, written
+level): after each it prints the resident set (``/proc/self/status`` VmRSS), the run's peak so far, the peak since
+the row above (VmHWM, reset at each row through ``/proc/self/clear_refs``: where the peak comes), glibc malloc's
+bytes in use and free (mallinfo2) and, with ``--trace``, tracemalloc's current and peak (numpy's arrays; PETSc's own
+memory does not show there). After the run it lists what the model still holds: every numpy array and scipy sparse matrix
 reachable from it (by attribute path), every PETSc Mat (MatInfo's memory) and Vec, largest first.
 Written to ``OUT/NAME.md`` (default benchmarks/results/cli_memory_profile.md). One process; nothing else heavy
 beside it.
@@ -14,8 +16,10 @@ beside it.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import functools
 import gc
+import math
 import os
 import subprocess
 import sys
@@ -45,9 +49,38 @@ def status() -> tuple[float, float]:
     return out["VmRSS"], out["VmHWM"]
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                "arena ordblks smblks hblks hblkhd usmblks fsmblks uordblks fordblks keepcost".split()]
+
+
+def heap() -> tuple[float, float, float]:
+    """glibc's malloc: bytes in use (heap and mmapped) and free in the heap (allocated from the system, not in use:
+    what a later malloc reuses before the resident set grows), MiB; NaN without glibc's mallinfo2."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = _MallInfo2
+        m = libc.mallinfo2()
+    except (OSError, AttributeError):
+        return math.nan, math.nan, math.nan
+    return (m.uordblks + m.hblkhd) / MIB, m.fordblks / MIB, m.hblkhd / MIB
+
+
+PEAK = [0.0]  # the run's VmHWM so far (the kernel's is reset at each row)
+
+
 def note(label: str) -> None:
+    """A row: VmRSS, the run's peak so far, the peak since the last row (VmHWM, then reset by
+    ``/proc/self/clear_refs``: when the peak came), malloc's bytes in use and free."""
     rss, hwm = status()
-    line = f"| {label} | {rss:,.0f} | {hwm:,.0f} |"
+    PEAK[0] = max(PEAK[0], hwm)
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")  # VmHWM := VmRSS
+    except OSError:
+        pass
+    used, free, _ = heap()
+    line = f"| {label} | {rss:,.0f} | {PEAK[0]:,.0f} | {hwm:,.0f} | {used:,.0f} | {free:,.0f} |"
     if tracemalloc.is_tracing():
         cur, peak = tracemalloc.get_traced_memory()
         line += f" {cur / MIB:,.0f} | {peak / MIB:,.0f} |"
@@ -211,6 +244,15 @@ def main(argv: list[str] | None = None) -> int:
         wrap(results, name)
     wrap(checkpoint, "write", "checkpoint")
     wrap(stepper.Stepper, "step", "level")
+    import solver.io.fields as fields
+    import solver.run.scheme as scheme
+
+    for cls in (scheme.FirstOrderScheme, scheme.SecondOrderScheme):  # a level's parts, where the class has its own
+        for name, label in (("memory", "memory commit"), ("damage", "damage step"),
+                            ("displacement", "displacement solve")):
+            if name in vars(cls):
+                wrap(cls, name, label)
+    wrap(fields.Outputs, "write", "written level")
     kept = {}
     build_model = model_mod.build_model
 
@@ -255,10 +297,13 @@ def main(argv: list[str] | None = None) -> int:
              f"{''.join(f' --set {s}' for s in a.set)}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
              f"commit {commit}, load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}; exit {code}, "
              f"{wall:.0f} s).", "",
-             "Resident set (VmRSS) and its high-water mark (VmHWM) after each stage, MiB"
+             "Resident set (VmRSS) after each stage, the run's peak so far, the peak since the row above (VmHWM, "
+             "reset at each row through /proc/self/clear_refs: where the peak comes), and glibc malloc's bytes in use "
+             "and free in its heap (mallinfo2: freed memory the process keeps and reuses), MiB"
              + (" (tracemalloc: numpy's and Python's allocations, current and peak)" if a.trace else "") + ":", "",
-             "| after | VmRSS | VmHWM |" + (" traced | traced peak |" if a.trace else ""),
-             "|---|---|---|" + ("---|---|" if a.trace else ""), *LOG, "",
+             "| after | VmRSS | peak so far | peak since the row above | malloc in use | malloc free |"
+             + (" traced | traced peak |" if a.trace else ""),
+             "|---|---|---|---|---|---|" + ("---|---|" if a.trace else ""), *LOG, "",
              "What the model holds after the run (reachable arrays and PETSc objects, largest first; a PETSc Mat as 12 B "
              "per allocated entry and 16 B per row; a preconditioner's hierarchy is listed below):", "",
              "| MiB | where | what |", "|---|---|---|",

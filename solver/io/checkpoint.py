@@ -21,6 +21,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from solver.config import Config, OutputConfig
@@ -74,6 +75,20 @@ def _write_sorted(h5, name: str, coords: np.ndarray, values: np.ndarray) -> None
             ds[start: start + len(rows)] = data[rows]
 
 
+def _point_coordinates(rule, Q, gdim: int) -> np.ndarray:
+    """The coordinates of the quadrature space Q's points (points, gdim), ghosts included: evaluated into one array
+    and laid out by Q's own dofmap (no space of their own, no second copy: 13 MiB each at 311,469 dofs in 3-D)."""
+    npts = rule.points.shape[0]
+    values = fem.Expression(ufl.SpatialCoordinate(rule.mesh), rule.points).eval(rule.cells)  # (cell, point * gdim)
+    dofs = Q.dofmap.list.array.reshape(-1, npts)[: len(rule.cells)].ravel()
+    size = Q.dofmap.index_map.size_local + Q.dofmap.index_map.num_ghosts
+    if np.array_equal(dofs, np.arange(size)):
+        return values.reshape(-1, gdim)
+    out = np.empty((size, gdim))
+    out[dofs] = values.reshape(-1, gdim)
+    return out
+
+
 @dataclass
 class _Field:
     coords: np.ndarray  # dof coordinates (owned first)
@@ -115,7 +130,7 @@ def _fields(model, clock=None) -> dict[str, _Field]:
         Q = model.history.M.function_space
         rule = model.history.rule
         gdim = model.geo.mesh.geometry.dim
-        cq = rule.evaluator(ufl.SpatialCoordinate(model.geo.mesh), rule.space((gdim,)))().reshape(-1, gdim)
+        cq = _point_coordinates(rule, Q, gdim)
         nq = Q.dofmap.index_map.size_local
     if clock is not None:
         for name, (space, a) in clock.arrays().items():

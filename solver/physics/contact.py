@@ -105,7 +105,7 @@ class ContactTerm:
             constant(w, k) * ufl.conditional(ufl.gt(penetration(u, nrm, gap_function(p, geo, degree)), 0.0),
                                              abs(ufl.dot(u, nrm)) + abs(gap_function(p, geo, degree)), 0.0)
             * ufl.dot(w, nrm) * _ds(geo, p, degree) for p, k in stiff)) if stiff else None
-        self._size = fpetsc.create_vector(self._size_form) if stiff else None
+        self._size: PETSc.Vec | None = None  # made at the first roundoff (a direct solver's exact steps only)
         self._normal_form = fem.form(sum(constant(w, k) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
                                          for p, k in stiff)) if stiff else None
 
@@ -127,6 +127,8 @@ class ContactTerm:
         1/mu amplifies what is left (0 without a law of fixed stiffness). Collective."""
         if self._size_form is None:
             return 0.0
+        if self._size is None:
+            self._size = fpetsc.create_vector(self._size_form)
         with self._size.localForm() as local:
             local.set(0.0)
         fpetsc.assemble_vector(self._size, self._size_form)

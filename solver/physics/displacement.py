@@ -52,14 +52,15 @@ class StiffnessRows:
         comm = K.getComm()
         self.rows = PETSc.IS().createGeneral(rows, comm=comm)
         self.K = K.createSubMatrix(self.rows, PETSc.IS().createStride(end - start, start, 1, comm=comm))
-        self.csr = self.K.getValuesCSR()  # K's values on those rows (global columns), written back by restore
         self.global_rows = rows
         self._Fc = self.K.createVecLeft()
         self._scatter: PETSc.Scatter | None = None
 
     def restore(self, J: PETSc.Mat) -> None:
         """Put K's values back on the kept rows of J (which holds K + C there)."""
-        indptr, cols, vals = self.csr
+        # K's values on those rows (global columns), copied out of the kept rows for this call only: a copy kept
+        # beside them held the same numbers twice (memory)
+        indptr, cols, vals = self.K.getValuesCSR()
         J.setValuesIJV(indptr, cols, vals, addv=PETSc.InsertMode.INSERT_VALUES, rowmap=self.global_rows)
         J.assemble()
 

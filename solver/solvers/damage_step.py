@@ -23,6 +23,7 @@ from petsc4py import PETSc
 
 from solver.config import DamageConfig
 from solver.errors import DamageSolveError
+from solver.physics.cell_blocks import CellBlockForm
 from solver.physics.material import strain
 from solver.solvers.linear import REASONS_KSP, make_ksp
 
@@ -75,6 +76,8 @@ class Damage:
         a, rhs = self._forms(z, xi, phi, k_, dx)
         self.a = fem.form(a)
         self.rhs_form = fem.form(rhs)
+        # the same form assembled a block of cells at a time (its coefficients packed a block at a time: memory)
+        self.rhs_blocks = CellBlockForm(V.mesh, rhs)
         self.A = fpetsc.assemble_matrix(self.a)
         self.A.assemble()
         if self.symmetric:
@@ -124,7 +127,7 @@ class Damage:
         """b = (L, xi) at the current u and zeta (levels n-1)."""
         with self.b.localForm() as b:
             b.set(0.0)
-        fpetsc.assemble_vector(self.b, self.rhs_form)
+        self.rhs_blocks.assemble(self.b)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
     def step(self) -> DamageStepInfo:
@@ -282,7 +285,7 @@ class CNAB2Damage(Damage):
             raise RuntimeError("correct_first_step follows the first step only")
         with self.s.localForm() as s:
             s.set(0.0)
-        fpetsc.assemble_vector(self.s, self.rhs_form)  # phi at (u_1 predicted, zeta_1 predicted)
+        self.rhs_blocks.assemble(self.s)  # phi at (u_1 predicted, zeta_1 predicted)
         self.s.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.explicit_half.mult(self._zeta0, self.b)
         self.b.axpy(0.5 * self.k, self.s)

@@ -414,7 +414,7 @@ class NewtonSolver(RetriesDirectly, DisplacementMethod):
         # the iterate the compliance path ended at on the last level solved (None: that level took no path): where
         # auto's take-over starts a first contact Newton has not solved (auto.py)
         self.path_end: PETSc.Vec | None = None
-        self._path_end = core.problem.u.vector.duplicate() if self.continuation is not None else None
+        self._path_end: PETSc.Vec | None = None  # path_end's vector, made at the first compliance path
         self.take_path = True  # False: a first contact Newton's FIRST_STEPS do not solve fails there (auto.py sets it)
 
         # a level whose iterative linear solve fails is solved again on the direct solver (NewtonCore.solve_level);
@@ -481,6 +481,8 @@ class NewtonSolver(RetriesDirectly, DisplacementMethod):
             test.max_it = limit
             path.set_scale(1.0)
         path.levels += 1
+        if self._path_end is None:
+            self._path_end = core.problem.u.vector.duplicate()
         core.problem.u.vector.copy(self._path_end)
         self.path_end = self._path_end
         reason, stage, n = core.plain_newton()
