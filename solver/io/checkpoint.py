@@ -31,6 +31,7 @@ from solver.io import layout
 from solver.io.files import on_rank0
 
 NAME = layout.CHECKPOINT
+FORMAT = 1  # the layout of checkpoint.h5 this version writes and reads; raised when a change makes old files unreadable
 
 
 _HASHED: list[tuple[Config, str]] = []  # the last scene hashed and its hash (a Config is frozen)
@@ -157,7 +158,7 @@ def write(directory: Path, model, step: int, t: float, part: int, clock=None) ->
     if comm.rank == 0:
         try:
             h5 = h5py.File(tmp, "w")
-            h5.attrs.update({"step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
+            h5.attrs.update({"format": FORMAT, "step": step, "t": t, "scene": scene_hash(model.cfg), "part": part,
                              **{f"mech_{k}": v for k, v in model.mech.scalars().items()},
                              **({f"damage_{k}": v for k, v in model.damage.scalars().items()} if model.damage else {}),
                              **({f"clock_{k}": v for k, v in clock.scalars().items()} if clock else {})})
@@ -218,6 +219,11 @@ def read(directory: Path, model, clock=None) -> Checkpoint:
         raise ConfigError(f"--restart: {path} does not exist (was the run started with output.checkpoint_every > 0?)")
     with h5py.File(path, "r") as h5:
         a = dict(h5.attrs)
+        version = int(a.get("format", 1))  # files from before the attribute have format 1's layout
+        if version != FORMAT:
+            raise ConfigError(f"--restart: {path} has checkpoint format {version}, this solver reads format {FORMAT} "
+                              f"({'a newer' if version > FORMAT else 'an older'} version of the solver wrote it); "
+                              "continue it with that version, or start the run again without --restart")
         if a["scene"] != scene_hash(model.cfg):
             raise ConfigError(f"--restart: the scene differs from the one that wrote {path} (only [output] may change), "
                               "or another version of the solver wrote it")

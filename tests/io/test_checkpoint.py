@@ -129,3 +129,30 @@ def test_read_refuses_a_checkpoint_lacking_what_this_version_keeps(comm, shared_
     with pytest.raises(ConfigError, match="lacks .*another version") as e:
         checkpoint.read(shared_tmp, fresh)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("version", [None, 2, 0])
+def test_read_checks_the_checkpoint_format(comm, shared_tmp, version):
+    """The file carries its format: one without it (written before the attribute) reads as format 1; one of another
+    format is refused with one line naming both formats."""
+    import h5py
+
+    model = build_model(from_dict(SCENE), comm)
+    Stepper(model).step(0)
+    checkpoint.write(shared_tmp, model, 0, 0.0, part=0)
+    comm.barrier()
+    if comm.rank == 0:
+        with h5py.File(shared_tmp / checkpoint.NAME, "r+") as h5:
+            assert h5.attrs["format"] == checkpoint.FORMAT
+            if version is None:
+                del h5.attrs["format"]
+            else:
+                h5.attrs["format"] = version
+    comm.barrier()
+    fresh = build_model(from_dict(SCENE), comm)
+    if version is None:
+        assert checkpoint.read(shared_tmp, fresh).step == 0
+        return
+    with pytest.raises(ConfigError, match=f"checkpoint format {version}, this solver reads format 1") as e:
+        checkpoint.read(shared_tmp, fresh)
+    assert ("a newer" if version > 1 else "an older") in str(e.value) and "\n" not in str(e.value)
