@@ -77,17 +77,8 @@ class AutoSolver(DisplacementMethod):
         core.begin_level()  # back to the iterative solver after the levels the direct one took (NewtonCore)
         u.vector.copy(self._start)
         f0 = core.factorizations
-        if self.switched:
-            try:
-                return self._handed_over(scale)
-            except DisplacementSolveError as exc:
-                if not self._direct_if_linear_failed(exc):
-                    raise
-                self._start.copy(u.vector)  # the level again from its start, solved directly
-                u.x.scatter_forward()
-                info = self._handed_over(scale)
-                return replace(info, iterations=info.iterations + exc.iterations,
-                               linear_solves=info.linear_solves + exc.iterations, factorizations=core.factorizations - f0)
+        if self.switched:  # the take-over's level; where its linear solve fails, again from its start, directly
+            return core.solve_level(lambda: self._handed_over(scale), self._start)
         core.test.growth_limit = GROWTH_STEPS
         try:
             return self.newton.solve(scale)

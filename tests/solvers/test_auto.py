@@ -185,6 +185,7 @@ def test_the_level_handed_over_gets_the_fallback_budget():
     core = SimpleNamespace(factorizations=0, test=SimpleNamespace(growth_limit=None), iterative=False,
                            begin_level=lambda: None)
     core.use_direct = lambda: setattr(core, "iterative", False)
+    core.solve_level = lambda solve, start: newton_module.NewtonCore.solve_level(core, solve, start)  # the real one on this core
 
     class FailingNewton:
         problem, fallbacks, path_end = SimpleNamespace(u=u), 0, None
