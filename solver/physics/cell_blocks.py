@@ -28,10 +28,10 @@ BLOCK = 65536  # owned cells a block (u and zeta of a P1 tetrahedron: 8 MiB of p
 class CellBlockForm:
     """``form`` on ``mesh`` (a linear form whose integrals are all over every cell, ``dx`` with any metadata) as
     one compiled form per block of ``block`` owned cells (default :data:`BLOCK`); any other form, or a mesh of one
-    block, stays one form. The number of blocks is the same on every rank (forms are compiled collectively): a rank
-    with fewer cells has empty blocks."""
+    block, stays one form (``compiled``, where the caller has compiled ``form`` already). The number of blocks is the
+    same on every rank (forms are compiled collectively): a rank with fewer cells has empty blocks."""
 
-    def __init__(self, mesh: dmesh.Mesh, form: ufl.Form, block: int | None = None) -> None:
+    def __init__(self, mesh: dmesh.Mesh, form: ufl.Form, block: int | None = None, compiled=None) -> None:
         block = BLOCK if block is None else block
         integrals = form.integrals()
         tdim = mesh.topology.dim
@@ -39,7 +39,7 @@ class CellBlockForm:
         blocks = mesh.comm.allreduce(-(-owned // block), op=MPI.MAX)
         every_cell = all(i.integral_type() == "cell" and i.subdomain_id() == "everywhere" for i in integrals)
         if not every_cell or blocks <= 1:
-            self.forms = [fem.form(form)]
+            self.forms = [fem.form(form) if compiled is None else compiled]
             return
         self.forms = []
         for b in range(blocks):

@@ -77,7 +77,7 @@ class Damage:
         self.a = fem.form(a)
         self.rhs_form = fem.form(rhs)
         # the same form assembled a block of cells at a time (its coefficients packed a block at a time: memory)
-        self.rhs_blocks = CellBlockForm(V.mesh, rhs)
+        self.rhs_blocks = CellBlockForm(V.mesh, rhs, compiled=self.rhs_form)
         self.A = fpetsc.assemble_matrix(self.a)
         self.A.assemble()
         if self.symmetric:
