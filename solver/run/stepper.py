@@ -107,12 +107,10 @@ def written_levels(first: int, last: int, steps: int, every: int) -> int:
     """How many of the levels first..last (both included) :func:`writes_level` writes, counted without a loop."""
     if last < first:
         return 0
-    ends = sum(1 for m in {0, steps} if first <= m <= last)  # the first and last levels: always written
-    if every <= 0:
-        return ends
-    multiples = last // every - (first - 1) // every if first > 0 else last // every + 1
-    return multiples + ends - (1 if first <= 0 <= last else 0) - (1 if first <= steps <= last and steps % every == 0
-                                                                  and steps != 0 else 0)
+    if every <= 0:  # the first and last levels only
+        return sum(1 for m in {0, steps} if first <= m <= last)
+    # the multiples of every (level 0 among them), and the last level where it is not one
+    return last // every - (first - 1) // every + (1 if first <= steps <= last and steps % every else 0)
 
 
 def levels(model: Model, start: int = 0, sensors: tuple = (), times=None, clock=None,
