@@ -108,24 +108,33 @@ def test_round_trip_carries_the_condensed_predictor(comm, shared_tmp):
                 assert fresh.u.vector.norm(kind) == pytest.approx(model.u.vector.norm(kind), rel=1e-10), n
 
 
-@pytest.mark.parametrize("drop", ["field", "scalar"])
-def test_read_refuses_a_checkpoint_lacking_what_this_version_keeps(comm, shared_tmp, drop):
-    """A checkpoint written by a version that kept fewer fields or values (an adaptive run's accumulated errors,
-    say) is refused with one line naming what it lacks, not a KeyError from h5py."""
+def _edited_checkpoint(comm, directory, edit):
+    """A level-0 checkpoint of SCENE whose file ``edit(h5)`` changes (on rank 0), and a fresh model to read it."""
     import h5py
 
     model = build_model(from_dict(SCENE), comm)
     Stepper(model).step(0)
-    checkpoint.write(shared_tmp, model, 0, 0.0, part=0)
+    checkpoint.write(directory, model, 0, 0.0, part=0)
     comm.barrier()
     if comm.rank == 0:
-        with h5py.File(shared_tmp / checkpoint.NAME, "r+") as h5:
-            if drop == "field":
-                del h5["zeta"]
-            else:
-                del h5.attrs[next(k for k in h5.attrs if k.startswith("mech_"))]
+        with h5py.File(directory / checkpoint.NAME, "r+") as h5:
+            edit(h5)
     comm.barrier()
-    fresh = build_model(from_dict(SCENE), comm)
+    return build_model(from_dict(SCENE), comm)
+
+
+@pytest.mark.parametrize("drop", ["field", "scalar"])
+def test_read_refuses_a_checkpoint_lacking_what_this_version_keeps(comm, shared_tmp, drop):
+    """A checkpoint written by a version that kept fewer fields or values (an adaptive run's accumulated errors,
+    say) is refused with one line naming what it lacks, not a KeyError from h5py."""
+
+    def edit(h5):
+        if drop == "field":
+            del h5["zeta"]
+        else:
+            del h5.attrs[next(k for k in h5.attrs if k.startswith("mech_"))]
+
+    fresh = _edited_checkpoint(comm, shared_tmp, edit)
     with pytest.raises(ConfigError, match="lacks .*another version") as e:
         checkpoint.read(shared_tmp, fresh)
     assert "\n" not in str(e.value)
@@ -135,21 +144,15 @@ def test_read_refuses_a_checkpoint_lacking_what_this_version_keeps(comm, shared_
 def test_read_checks_the_checkpoint_format(comm, shared_tmp, version):
     """The file carries its format: one without it (written before the attribute) reads as format 1; one of another
     format is refused with one line naming both formats."""
-    import h5py
 
-    model = build_model(from_dict(SCENE), comm)
-    Stepper(model).step(0)
-    checkpoint.write(shared_tmp, model, 0, 0.0, part=0)
-    comm.barrier()
-    if comm.rank == 0:
-        with h5py.File(shared_tmp / checkpoint.NAME, "r+") as h5:
-            assert h5.attrs["format"] == checkpoint.FORMAT
-            if version is None:
-                del h5.attrs["format"]
-            else:
-                h5.attrs["format"] = version
-    comm.barrier()
-    fresh = build_model(from_dict(SCENE), comm)
+    def edit(h5):
+        assert h5.attrs["format"] == checkpoint.FORMAT
+        if version is None:
+            del h5.attrs["format"]
+        else:
+            h5.attrs["format"] = version
+
+    fresh = _edited_checkpoint(comm, shared_tmp, edit)
     if version is None:
         assert checkpoint.read(shared_tmp, fresh).step == 0
         return
