@@ -92,6 +92,8 @@ MEANING: dict[str, str] = {
     "solver.quadrature_degree": "quadrature degree of the memory terms (0: from the degrees)",
     "solver.damage_quadrature_degree": "quadrature degree of the damage source (0: from the degrees)",
     "solver.contact_quadrature_degree": "quadrature degree of the contact term (0: from the degrees)",
+    "solver.contact_points": ("where the contact law acts on a facet: gauss (the Gauss points of "
+                              "contact_quadrature_degree) or nodes (u's nodes, Newton-Cotes weights: a lumped contact)"),
     "solver.petsc_options": "extra PETSc options, a table option = value",
     "solver.newton_fallback": "re-solve a level plain Newton does not solve with a line-searched Newton",
     "output.directory": "results directory (the CLI's --output wins)",
@@ -122,6 +124,7 @@ CHOICES: dict[str, tuple] = {
     "material.model": material.MODELS, "discretization.u_degree": DEGREES, "discretization.zeta_degree": DEGREES,
     "time.order": (1, 2), "memory.kernel": memory.KERNELS, "memory.rule": memory.RULES,
     "solver.linear": solver.LINEAR, "solver.method": solver.METHODS, "solver.damage_scheme": solver.DAMAGE_SCHEMES,
+    "solver.contact_points": solver.CONTACT_POINTS,
     "output.fields": output.FIELD_NAMES, "output.precision": output.PRECISIONS, "accuracy.degrees": DEGREES,
     "accuracy.time": accuracy.TIME_MODES,
 }

@@ -14,6 +14,7 @@ NEWTON_METHODS = ("auto", "newton", "newton_energy", "newton_condensed")
 DAMAGE_SCHEMES = ("explicit", "semi_implicit")
 LINEAR = ("auto", "petsc", "cholmod", "mumps", "redundant", "iterative")
 _DEGREES = ("quadrature_degree", "damage_quadrature_degree", "contact_quadrature_degree")
+CONTACT_POINTS = ("gauss", "nodes")  # the contact term's points on a facet (physics/quadrature.ContactRule)
 
 
 @dataclass(frozen=True)
@@ -22,6 +23,12 @@ class SolverConfig:
     fixed_point; auto: Newton until a level fails, newton_condensed from there, solver/solvers/auto.py) with its
     tolerance and iteration limit, the penalty-duality parameter (omega = value / mu), the
     damage scheme (explicit | semi_implicit), the linear solver and quadrature degrees.
+
+    ``contact_points``: where the contact law acts on each contact facet: ``gauss``, the Gauss points of
+    ``contact_quadrature_degree``; ``nodes``, u's nodes on the facet with the Newton-Cotes weights (P1: the vertices;
+    P2 in 2-D: Simpson's rule), one point per normal dof, so the contact matrix is lumped (``contact_quadrature_degree``
+    is then not read). A different discretization of the contact term: its results differ from ``gauss``'s by the
+    discretization error (docs/guide/contact.md).
 
     ``newton_fallback``: a contact level that plain Newton does not solve within ``max_it`` is solved
     again by Newton with an exact line search on the level's energy (solver/solvers/damped_newton.py), with
@@ -43,6 +50,7 @@ class SolverConfig:
     quadrature_degree: int = 0  # 0: from the degrees ([discretization]); resolved when parsed
     damage_quadrature_degree: int = 0
     contact_quadrature_degree: int = 0
+    contact_points: str = "gauss"
     petsc_options: tuple[tuple[str, str], ...] = ()
     newton_fallback: bool = True
 
@@ -68,6 +76,11 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
         degs[key] = integer(ctx, f"solver.{key}", t.get(key, auto[key]))
         need(ctx, f"solver.{key}", degs[key], 1 <= degs[key] <= 10, "must be in 1..10")
     has_contact = any(b.role == "contact" for b in scene["boundary"])
+    contact_points = string(ctx, "solver.contact_points", t.get("contact_points", d.contact_points), CONTACT_POINTS)
+    if contact_points == "nodes" and scene["dim"] == 3 and disc.u_degree == 2:
+        # the P2 triangle's nodal (Newton-Cotes) rule weighs its vertices 0: the law would not act there
+        raise ctx.fail("solver.contact_points", contact_points, "needs discretization.u_degree = 1 in 3-D "
+                       "(P2 triangles have no nodal rule with weight at the vertices); use 'gauss'")
     if linear == "iterative" and method not in NEWTON_METHODS:
         # their loops factor one matrix once and re-solve it many times: a direct solve is what they need
         raise ctx.fail("solver.linear", linear, f"needs solver.method = 'newton' (not {method!r}); "
@@ -84,7 +97,7 @@ def parse(ctx: Ctx, t: dict, scene: dict) -> SolverConfig:
     if damage_scheme == "semi_implicit" and scene["time"].order == 2:
         raise ctx.fail("solver.damage_scheme", damage_scheme, "is first order; time.order = 2 uses its own damage step")
     fallback = boolean(ctx, "solver.newton_fallback", t.get("newton_fallback", d.newton_fallback))
-    return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs,
+    return SolverConfig(rtol, max_it, linear, method, omega, damage_scheme, **degs, contact_points=contact_points,
                         petsc_options=_petsc_options(ctx, t.get("petsc_options", {})), newton_fallback=fallback)
 
 

@@ -22,6 +22,7 @@ from solver.laws.contact import LinearLaw
 from solver.mesh.geometry import Geometry
 from solver.physics.gap import gap_function, gap_values  # noqa: F401  (gap_values: re-exported)
 from solver.physics.operators import assemble_without_diagonal
+from solver.physics.quadrature import ContactRule, contact_rule, facet_type
 
 
 def normal_compliance(r: ufl.core.expr.Expr, mu: float) -> ufl.core.expr.Expr:
@@ -39,11 +40,12 @@ def penetration(u, n, gap):
     return ufl.dot(u, n) - gap
 
 
-def _ds(geo: Geometry, part: BoundaryConfig, degree: int):
-    return geo.ds(geo.tags[part.name], metadata={"quadrature_degree": degree})
+def _ds(geo: Geometry, part: BoundaryConfig, degree: int | ContactRule):
+    """The part's ``ds`` with the contact rule (a Gauss degree or a :class:`ContactRule`)."""
+    return geo.ds(geo.tags[part.name], metadata=contact_rule(degree).metadata(facet_type(geo.mesh)))
 
 
-def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule):
     """j(u, w) = sum over contact parts of int p(u_nu - g) w_nu ds."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
@@ -51,13 +53,13 @@ def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int
     )
 
 
-def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule):
     """Total normal contact force int p(u_nu - g) ds (a functional)."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(compliance(penetration(u, n, gap_function(p, geo, degree)), p) * _ds(geo, p, degree) for p in parts)
 
 
-def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int):
+def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule):
     """Length (area) of the contact zone where u_nu - g > 0, at the facet quadrature points."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
@@ -77,7 +79,7 @@ class ContactTerm:
     """
 
     def __init__(self, geo: Geometry, u: fem.Function, arguments: tuple, parts: tuple[BoundaryConfig, ...],
-                 degree: int, bcs) -> None:
+                 degree: int | ContactRule, bcs) -> None:
         du, w = arguments
         # the contact term's factor: 1 but while a first contact is solved by a continuation in the compliance
         # (solvers/continuation.py: s j(u) is the term of the laws s p, softer for s < 1)

@@ -15,6 +15,7 @@ from solver.config import BoundaryConfig
 from solver.laws.contact import PointLaws
 from solver.mesh.geometry import Geometry
 from solver.physics.contact import gap_values
+from solver.physics.quadrature import ContactRule, contact_rule
 
 
 def _facet_frame(facet_vertices, cell_vertices: list, dofs, x: np.ndarray):
@@ -52,11 +53,12 @@ class ContactPoints:
     :attr:`~solver.config.BoundaryConfig.contact_law` on its points, in its numpy form).
 
     N (sparse, local dofs incl. ghosts -> points of the facets this rank integrates) and the
-    weights W reproduce the ``ds`` rule of :func:`residual` exactly, so every method works on
+    weights W reproduce the ``ds`` rule of :func:`residual` exactly (Gauss or the nodes: ``degree`` is a Gauss degree
+    or a :class:`~solver.physics.quadrature.ContactRule`), so every method works on
     the same discrete contact term. Used by the fixed-point methods and for the penetration.
     """
 
-    def __init__(self, geo: Geometry, V, parts: tuple[BoundaryConfig, ...], degree: int) -> None:
+    def __init__(self, geo: Geometry, V, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule) -> None:
 
         mesh = geo.mesh
         tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
@@ -68,7 +70,7 @@ class ContactPoints:
         c2v = mesh.topology.connectivity(tdim, 0)
         ncells = mesh.topology.index_map(tdim).size_local
         x = V.tabulate_dof_coordinates()  # by dof node: topology vertex numbers are not geometry node numbers
-        s, wq = basix.make_quadrature(basix.CellType.interval, degree)
+        s, wq = contact_rule(degree).facet_quadrature(basix.CellType.interval)
         s = s[:, 0]
         bs = V.dofmap.index_map_bs
         degree_u = V.ufl_element().degree()

@@ -35,6 +35,7 @@ from solver.config import BoundaryConfig
 from solver.mesh.geometry import Geometry
 from solver.physics.contact import compliance, penetration
 from solver.physics.gap import gap_function
+from solver.physics.quadrature import ContactRule, contact_rule, facet_type
 
 
 def _assemble(form: fem.Form) -> PETSc.Vec:
@@ -51,7 +52,7 @@ def _assemble(form: fem.Form) -> PETSc.Vec:
 class ContactTraces:
     """The contact pressure, u_ν, g and the penetration on Γ_C as P1 functions (:meth:`update` per level)."""
 
-    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule,
                  pressure_floor: float = 0.0) -> None:
         mesh = geo.mesh
         self.geo, self.parts, self.comm = geo, parts, geo.comm
@@ -72,8 +73,10 @@ class ContactTraces:
             self.part_dofs[part.name] = dofs[dofs < n_local]
         n = ufl.FacetNormal(mesh)
 
+        metadata = contact_rule(degree).metadata(facet_type(mesh))
+
         def ds(q):
-            return geo.ds(geo.tags[q.name], metadata={"quadrature_degree": degree})
+            return geo.ds(geo.tags[q.name], metadata=metadata)
 
         psi = ufl.TestFunction(S)
         self.mass = _assemble(fem.form(sum(psi * ds(q) for q in parts))).array_r.copy()

@@ -30,6 +30,7 @@ from solver.physics.displacement import DisplacementProblem
 from solver.physics.gap import ReachableError, segment_errors
 from solver.physics.material import strain
 from solver.physics.operators import Operators
+from solver.physics.quadrature import ContactRule
 
 
 def dirichlet_rows_form(ops: Operators, constrained: np.ndarray) -> fem.Form:
@@ -120,7 +121,7 @@ ZONE = 1e-3  # the pressure above this fraction of the peak: the contact zone, a
 class DisplacementDiagnostics:
     """What the time series reports about u at each level (all values the same on every rank)."""
 
-    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int,
+    def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule,
                  points: ContactPoints | None, reactions: Reactions | None = None,
                  strain_norm: Callable[[], float] | None = None, pressure_floor: float = 0.0) -> None:
         self.geo, self.u, self.points, self.reactions = geo, u, points, reactions

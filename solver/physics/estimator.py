@@ -42,6 +42,7 @@ from solver.config import BoundaryConfig, MaterialConfig
 from solver.mesh.geometry import Geometry
 from solver.physics.contact import compliance, gap_function, penetration
 from solver.physics.material import elasticity, strain
+from solver.physics.quadrature import ContactRule, contact_rule, facet_type
 
 
 class _Projection:
@@ -88,7 +89,7 @@ class ContactPressure(_Projection):
     assembled once, so an update is one assembly and one CG solve."""
 
     def __init__(self, geo: Geometry, u: fem.Function, parts: tuple[BoundaryConfig, ...],
-                 contact_degree: int | None) -> None:
+                 contact_degree: int | ContactRule | None) -> None:
         mesh = geo.mesh
         degree = u.function_space.ufl_element().degree()
         S = fem.FunctionSpace(mesh, ("Lagrange", degree))
@@ -104,10 +105,12 @@ class ContactPressure(_Projection):
         A = fpetsc.assemble_matrix(fem.form(mass + zero * lam * psi * ufl.dx),
                                    bcs=[fem.dirichletbc(fem.Function(S), off)])
         A.assemble()
-        qd = {} if contact_degree is None else {"quadrature_degree": contact_degree}
+        # None: FFCx's estimated degree, the gap at degree 2's points; else the contact term's rule
+        qd = {} if contact_degree is None else contact_rule(contact_degree).metadata(facet_type(mesh))
+        gap_rule = 2 if contact_degree is None else contact_degree
         # b is zero off Γ_C (the traces of those dofs' basis functions vanish); Jacobi-preconditioned CG on the
         # boundary mass matrix converges in a few tens of iterations
-        L = fem.form(sum(compliance(penetration(u, n, gap_function(p, geo, qd.get("quadrature_degree", 2))), p) * psi
+        L = fem.form(sum(compliance(penetration(u, n, gap_function(p, geo, gap_rule)), p) * psi
                          * geo.ds(geo.tags[p.name], metadata=qd) for p in parts))
         self._init_solver(A, L, self.pressure, "jacobi")
 
@@ -123,7 +126,7 @@ class ResidualEstimator:
     def __init__(self, geo: Geometry, u: fem.Function, material: MaterialConfig,
                  boundaries: tuple[BoundaryConfig, ...], tractions: dict[str, fem.Constant], degree: int,
                  body_force: fem.Constant | None = None, memory: MemoryProjection | None = None,
-                 contact_degree: int | None = None) -> None:
+                 contact_degree: int | ContactRule | None = None) -> None:
         mesh = geo.mesh
         self.geo = geo
         V0 = fem.FunctionSpace(mesh, ("DG", 0))
@@ -196,7 +199,7 @@ def estimator_for(model) -> ResidualEstimator:
     if model.history is not None:
         memory = MemoryProjection(model.history.M, model.rule.dx, cfg.discretization.u_degree - 1)
     return ResidualEstimator(model.geo, model.u, cfg.material, cfg.boundaries, tractions, degree, body_force, memory,
-                             cfg.solver.contact_quadrature_degree)
+                             ContactRule.of(cfg))
 
 
 def dorfler(eta2: np.ndarray, theta: float, comm: MPI.Comm) -> np.ndarray:

@@ -28,6 +28,7 @@ from dolfinx import fem
 from solver.config import BoundaryConfig
 from solver.config.boundary import AXES
 from solver.config.tables import as_array
+from solver.physics.quadrature import ContactRule, contact_rule
 
 
 def gap_values(part: BoundaryConfig, x: np.ndarray) -> np.ndarray:
@@ -125,15 +126,16 @@ def varying(part: BoundaryConfig) -> bool:
 _FIELDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def gap_function(part: BoundaryConfig, geo, degree: int) -> float | fem.Function:
-    """The part's gap for UFL: its number, or a DG field equal to g at the part's facet quadrature points of
-    ``degree`` (built once per mesh, part and degree)."""
+def gap_function(part: BoundaryConfig, geo, degree: int | ContactRule) -> float | fem.Function:
+    """The part's gap for UFL: its number, or a DG field equal to g at the part's facet points of the contact rule
+    (a Gauss degree or a :class:`~solver.physics.quadrature.ContactRule`; built once per mesh, part and rule)."""
     if not varying(part):
         return part.gap
+    rule = contact_rule(degree)
     cache = _FIELDS.setdefault(geo.mesh, {})
-    key = (id(part), degree)  # by identity: hashing a part hashes its table (10⁵ rows: 0.2 s)
+    key = (id(part), rule)  # by identity: hashing a part hashes its table (10⁵ rows: 0.2 s)
     if key not in cache or cache[key][0] is not part:
-        cache[key] = (part, _fill(part, geo, degree))
+        cache[key] = (part, _fill(part, geo, rule))
     return cache[key][1]
 
 
@@ -154,13 +156,13 @@ def _field_degree(tdim: int, npts: int) -> int:
     return k + 1
 
 
-def _fill(part: BoundaryConfig, geo, degree: int) -> fem.Function:
+def _fill(part: BoundaryConfig, geo, rule: ContactRule) -> fem.Function:
     """The DG field: per cell with facets of the part, the polynomial of least coefficients through g at their points."""
     mesh = geo.mesh
     tdim, fdim = mesh.topology.dim, mesh.topology.dim - 1
     cell_type = {2: basix.CellType.triangle, 3: basix.CellType.tetrahedron}[tdim]
     facet_type = {2: basix.CellType.interval, 3: basix.CellType.triangle}[tdim]
-    points, _ = basix.make_quadrature(facet_type, degree)
+    points, _ = rule.facet_quadrature(facet_type)
     k = _field_degree(tdim, len(points))
     W = fem.FunctionSpace(mesh, ("DG", k))
     g = fem.Function(W, name=f"gap_{part.name}")

@@ -28,6 +28,7 @@ from solver.config import BoundaryConfig
 from solver.mesh.geometry import Geometry
 from solver.physics import contact
 from solver.physics.operators import Operators
+from solver.physics.quadrature import ContactRule
 
 
 @dataclass(frozen=True)
@@ -68,9 +69,9 @@ class LevelForms:
 
 
 def declare_level(geo: Geometry, u: fem.Function, ops: Operators, contact_parts: tuple[BoundaryConfig, ...],
-                  contact_degree: int, implicit_memory: ufl.Form | None = None) -> LevelForms:
+                  contact_degree: int | ContactRule, implicit_memory: ufl.Form | None = None) -> LevelForms:
     """The level's forms from the builders of each term: ``ops`` (a, l_n, (M_n, eps(w))), the contact parts
-    and their quadrature degree (j), and F_m as the problem holds it (``DisplacementProblem.implicit_memory``)."""
+    and their rule (j: a Gauss degree or a ContactRule), and F_m as the problem holds it (``DisplacementProblem.implicit_memory``)."""
     j = contact.residual(u, ops.w, geo, contact_parts, contact_degree) if contact_parts else None
     return LevelForms(u, ops.du, ops.w, stiffness=ops.bulk, loads=ops.load_ufl, contact=j, memory=ops.memory_ufl,
                       implicit_memory=implicit_memory)

@@ -6,12 +6,73 @@ them, so they are written through cell averages (:mod:`solver.io.fields`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import basix
 import numpy as np
 import ufl
 from dolfinx import fem
 
 _BASIX_CELL = {"triangle": basix.CellType.triangle, "tetrahedron": basix.CellType.tetrahedron}
+
+
+@dataclass(frozen=True)
+class ContactRule:
+    """The contact term's rule on each contact facet: ``points = "gauss"``, FFCx's default rule of ``degree`` (what
+    ``ds(metadata={"quadrature_degree": degree})`` integrates with), or ``"nodes"``, the facet's Lagrange nodes of
+    ``order`` (u's degree) with the Newton-Cotes weights: P1 the vertices with equal weights (the trapezoid rule in
+    2-D, the vertex rule in 3-D), P2 in 2-D the end points and the midpoint with Simpson's 1/6, 2/3, 1/6 (the 3-point
+    Gauss-Lobatto rule). With "nodes" the law acts at the nodes, one point per normal displacement dof, and the
+    contact matrix is diagonal on Γ_C's nodes (lumped); ``degree`` is not read. P2 nodes on a triangle have no
+    such rule with positive weights at the vertices, so "nodes" with ``order`` 2 is refused on triangular facets.
+
+    Every consumer of the contact term's points (the UFL term, the gap field, the numpy points, the traces, the
+    estimator's pressure) takes its points from here, so they agree."""
+
+    degree: int
+    points: str = "gauss"
+    order: int = 1
+
+    @classmethod
+    def of(cls, cfg) -> ContactRule:
+        """The rule of a scene (a :class:`~solver.config.Config`)."""
+        return cls.from_solver(cfg.solver, cfg.discretization.u_degree)
+
+    @classmethod
+    def from_solver(cls, solver, u_degree: int) -> ContactRule:
+        """The rule of a ``[solver]`` table (``contact_points``, ``contact_quadrature_degree``) for u of ``u_degree``
+        (read by "nodes" only: every Gauss rule of a degree is one object, one gap field)."""
+        return cls(solver.contact_quadrature_degree, solver.contact_points,
+                   u_degree if solver.contact_points == "nodes" else 1)
+
+    def facet_quadrature(self, facet: basix.CellType) -> tuple[np.ndarray, np.ndarray]:
+        """The rule's points on the reference facet (n, fdim) and their weights (summing to its measure)."""
+        if self.points == "gauss":
+            return basix.make_quadrature(facet, self.degree)
+        if facet == basix.CellType.interval:  # GLL with order + 1 points: the P1 and P2 nodes (0, 1 [, 1/2])
+            return basix.make_quadrature(basix.QuadratureType.gll, facet, 2 * self.order - 1)
+        if facet == basix.CellType.triangle and self.order == 1:
+            return basix.geometry(facet)[:, :2].copy(), np.full(3, 1.0 / 6.0)
+        raise ValueError(f"contact points 'nodes': no nodal rule for P{self.order} on {facet.name} facets")
+
+    def metadata(self, facet: basix.CellType) -> dict:
+        """The ``ds`` metadata of the rule (Gauss: exactly the degree's, as the term always had)."""
+        if self.points == "gauss":
+            return {"quadrature_degree": self.degree}
+        # FFCx 0.5's "vertex" scheme takes the cell's vertices, not the facet's, for a ds: the rule is given as custom
+        points, weights = self.facet_quadrature(facet)
+        return {"quadrature_rule": "custom", "quadrature_degree": 2 * self.order - 1,
+                "quadrature_points": points, "quadrature_weights": weights}
+
+
+def contact_rule(rule: int | ContactRule) -> ContactRule:
+    """A :class:`ContactRule` from a rule or a Gauss degree."""
+    return rule if isinstance(rule, ContactRule) else ContactRule(int(rule))
+
+
+def facet_type(mesh) -> basix.CellType:
+    """The basix type of the mesh's facets (interval in 2-D, triangle in 3-D)."""
+    return {2: basix.CellType.interval, 3: basix.CellType.triangle}[mesh.topology.dim]
 
 
 def all_finite(a: np.ndarray, total: float | None = None) -> bool:

@@ -70,7 +70,7 @@ def build_model(cfg: Config, comm: MPI.Comm, geo: Geometry | None = None, contac
     dofs = V.dofmap.index_map.size_global * V.dofmap.index_map_bs
     linear = choose_linear(cfg.solver.linear, comm, geo.dim, dofs, cfg.solver.method, steps)
     # the resolved linear solver's one truth; cfg itself keeps the scene's value (restart's hash)
-    settings = MethodSettings.from_config(cfg.solver, linear, contact_near_nullspace)
+    settings = MethodSettings.from_config(cfg.solver, linear, contact_near_nullspace, cfg.discretization.u_degree)
     damage = None
     if cfg.damage.enabled:
         Z = fem.FunctionSpace(mesh, ("CG", disc.zeta_degree))

@@ -28,6 +28,7 @@ from solver.physics.displacement import DisplacementProblem
 from solver.physics.memory import History
 from solver.physics.memory_source import PointStrainNorm
 from solver.physics.operators import Dirichlet, Operators, check_rigid_motions
+from solver.physics.quadrature import ContactRule
 
 PRESSURE_FLOOR = 1e-12  # a contact pressure below this times Young's modulus is round-off: no contact
 
@@ -48,10 +49,10 @@ class DisplacementPhysics:
 
 
 def build_physics(geo: Geometry, u: fem.Function, material: MaterialConfig, boundaries: tuple[BoundaryConfig, ...],
-                  contact_degree: int, history: History | None = None, implicit_term=None,
+                  contact_degree: int | ContactRule, history: History | None = None, implicit_term=None,
                   body_force: BodyForceConfig | None = None) -> DisplacementPhysics:
     """The displacement problem's physics for the scene's boundaries (``contact_degree``: the contact term's
-    quadrature degree)."""
+    rule, a :class:`~solver.physics.quadrature.ContactRule` or a Gauss degree)."""
     tractions = tuple(b for b in boundaries if b.role == "traction")
     parts = tuple(b for b in boundaries if b.role == "contact")
     deg = contact_degree

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from solver.config import SolverConfig
+from solver.physics.quadrature import ContactRule
 
 
 @dataclass(frozen=True)
@@ -43,12 +44,12 @@ class NewtonSettings:
 @dataclass(frozen=True)
 class PointIterationSettings:
     """The fixed-point methods' tolerance (||F|| <= rtol * scale) and iteration limit, penalty-duality's omega
-    factor (omega = value / mu) and the contact quadrature degree of its penalty matrix."""
+    factor (omega = value / mu) and the contact rule of its penalty matrix (a Gauss degree or a ContactRule)."""
 
     rtol: float = 1e-10
     max_it: int = 25
     penalty_duality_omega: float = 0.5
-    contact_quadrature_degree: int = 1
+    contact_quadrature_degree: int | ContactRule = 1
 
 
 @dataclass(frozen=True)
@@ -59,16 +60,18 @@ class MethodSettings:
     linear: LinearSettings
     newton: NewtonSettings
     points: PointIterationSettings
-    contact_quadrature_degree: int
+    contact_quadrature_degree: int | ContactRule  # the contact term's rule (ContactRule), or a Gauss degree
 
     @classmethod
-    def from_config(cls, cfg: SolverConfig, linear: str, contact_near_nullspace: bool = True) -> MethodSettings:
-        """The settings of a scene's ``[solver]`` with ``linear``, the linear solver its ``linear`` resolves to."""
+    def from_config(cls, cfg: SolverConfig, linear: str, contact_near_nullspace: bool = True,
+                    u_degree: int = 1) -> MethodSettings:
+        """The settings of a scene's ``[solver]`` with ``linear``, the linear solver its ``linear`` resolves to, for u
+        of ``u_degree`` (the contact rule's nodes)."""
+        rule = ContactRule.from_solver(cfg, u_degree)
         return cls(
             method=cfg.method,
             linear=LinearSettings(linear, cfg.petsc_options),
             newton=NewtonSettings(cfg.rtol, cfg.max_it, cfg.newton_fallback, contact_near_nullspace),
-            points=PointIterationSettings(cfg.rtol, cfg.max_it, cfg.penalty_duality_omega,
-                                          cfg.contact_quadrature_degree),
-            contact_quadrature_degree=cfg.contact_quadrature_degree,
+            points=PointIterationSettings(cfg.rtol, cfg.max_it, cfg.penalty_duality_omega, rule),
+            contact_quadrature_degree=rule,
         )
