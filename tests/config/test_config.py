@@ -133,6 +133,10 @@ REJECT = [
     ({"body_force": {"f": [[0.0, 0.0, 0.0], [-1.0, 0.0, 1.0]]}}, "body_force.f"),
     ({"solver": {"linear": "iterative", "method": "fixed_point"}}, "solver.linear"),
     ({"solver": {"linear": "gmres"}}, "solver.linear"),
+    ({"solver": {"contact_points": "vertex"}}, "solver.contact_points"),
+    ({"solver": {"contact_points": 1}}, "solver.contact_points"),
+    ({"mesh": {"kind": "box"}, "boundary": _BOX_PARTS, "material": {"model": "3d"}, "discretization": {"u_degree": 2},
+      "solver": {"contact_points": "nodes"}}, "solver.contact_points"),
     # the built-in box
     *[({"mesh": {"kind": "box", **m}, "boundary": _BOX_PARTS, "material": {"model": "3d"}}, key) for m, key in (
         ({"corners": [[0, 0], [1, 1]]}, "mesh.corners[0]"),
