@@ -4,7 +4,7 @@ compliance law.
 
     python scripts/hertz_contact.py [--line 50 100 200] [--line-p2 50 100] [--out benchmarks/results/hertz_contact.md]
         [--sphere P1:0 P1:1 P1:2 P2:0 P2:1] [--sphere-h 0.06] [--sphere-mu 1e-6]
-        [--sphere-out benchmarks/results/hertz_sphere.md]
+        [--sphere-out benchmarks/results/hertz_sphere.md] [--points gauss nodes]
 
 Line contact (μ = 1e-8): the block (0, 1)², symmetric about x = 0 (u_x = 0 there), clamped at y = 1, pressed at y = 0
 by the circle of radius R = 1 whose centre is at (0, −(R − δ)); with the measured force per unit length P of the half
@@ -20,6 +20,10 @@ its own (``--sphere-case``) and measures the reported pressure (the lumped-mass 
 law's pressure at the contact term's quadrature points, each as a weighted mean near the axis (weight
 (1 − r²/ρ²)₊, ρ = a/4) against Hertz's mean, and as an L² error over r < a/2; and the reported pressure at the
 vertices: the centre one, the largest and rms difference from Hertz over r < a/2.
+
+``--points A B``: every line case is run with ``solver.contact_points`` = A and = B (the law at the Gauss points or at
+the nodes); a sphere case takes the tag ``:nodes`` (``P1:0:nodes``), and the reference of the reference table is
+always a Gauss case.
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ def run(toml: str, directory: Path, sets: list[str]) -> tuple[dict, dict]:
     return read_series(directory / "r" / "contact.xdmf"), read_csv(directory / "r" / "timeseries.csv")[0]
 
 
-def line(n: int, degree: int, delta: float) -> dict:
+def line(n: int, degree: int, delta: float, points: str = "gauss") -> dict:
     toml = BASE.format(E=E, NU=NU, model="plane_strain") + f"""
 [mesh]
 nx = {n}
@@ -93,7 +97,7 @@ obstacle = {{shape = "circle", centre = [0.0, {-(R - delta)}], radius = {R}}}
 """
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        contact, row = run(toml, Path(tmp), [])
+        contact, row = run(toml, Path(tmp), [f"solver.contact_points='{points}'"] if points != "gauss" else [])
         seconds = time.perf_counter() - start
     x, p = contact["points"][:, 0], contact["fields"]["contact_pressure"][0]
     order = np.argsort(x)
@@ -104,12 +108,13 @@ obstacle = {{shape = "circle", centre = [0.0, {-(R - delta)}], radius = {R}}}
     inner = x < a / 2
     diff = (p[inner] - p0 * np.sqrt(1 - (x[inner] / a) ** 2)) / p0
     profile, rms = float(np.max(np.abs(diff))), float(np.sqrt(np.mean(diff**2)))
-    return {"mesh": f"P{degree}, n = {n}", "h": 1.0 / n, "a/h": a * n, "force": force, "peak": float(p.max()),
+    return {"mesh": f"P{degree}, n = {n}" + (f", {points}" if points != "gauss" else ""), "h": 1.0 / n,
+            "newton": row["newton_iterations"], "a/h": a * n, "force": force, "peak": float(p.max()),
             "p0": p0, "profile": profile, "rms": rms, "integral": float(np.trapz(p, x)), "seconds": seconds}
 
 
 def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad: int, max_it: int,
-                delta: float = 0.01) -> dict:
+                delta: float = 0.01, points: str = "gauss") -> dict:
     """One sphere run in this process (scripts call it through ``--sphere-case``): the block (0, L)³ meshed by
     meshes/hertz3d.py, clamped at z = L, pressed at z = 0 by the sphere R at depth δ; level 0 solved, then the
     pressure measured at the vertices (the reported, recovered one) and at the contact term's quadrature points
@@ -120,6 +125,7 @@ def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad
 
     from solver.config import from_dict
     from solver.physics.contact import compliance, gap_function, penetration
+    from solver.physics.quadrature import ContactRule, facet_type
     from solver.run.model import build_model
     from solver.run.stepper import Stepper
 
@@ -133,7 +139,8 @@ def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad
             "mesh": {"kind": "gmsh", "file": str(msh)},
             "material": {"E": E, "nu": NU, "model": "3d"}, "discretization": {"u_degree": degree},
             "memory": {"kernel": "none"}, "damage": {"enabled": False}, "time": {"T": 1.0, "k": 1.0},
-            "solver": {"max_it": max_it, **({"contact_quadrature_degree": quad} if quad else {})},
+            "solver": {"max_it": max_it, "contact_points": points,
+                       **({"contact_quadrature_degree": quad} if quad else {})},
             "boundary": {
                 "sym_x": {"role": "displacement", "displacement": [0.0, "free", "free"]},
                 "sym_y": {"role": "displacement", "displacement": ["free", 0.0, "free"]},
@@ -148,11 +155,12 @@ def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad
         seconds = time.perf_counter() - start
     geo, u = model.geo, model.u
     part = next(b for b in model.cfg.boundaries if b.role == "contact")
-    qdeg = model.mech.contact.jacobian_ufl.integrals()[0].metadata()["quadrature_degree"]
+    rule = ContactRule.of(model.cfg)
+    qdeg = rule.degree if points == "gauss" else "nodes"
     x = ufl.SpatialCoordinate(geo.mesh)
     r2 = x[0] ** 2 + x[1] ** 2
-    law = compliance(penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, qdeg)), part)
-    ds = geo.ds(geo.tags[part.name], metadata={"quadrature_degree": qdeg})
+    law = compliance(penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, rule)), part)
+    ds = geo.ds(geo.tags[part.name], metadata=rule.metadata(facet_type(geo.mesh)))
     traces = model.mech.diagnostics.traces
     recovered = traces.pressure
 
@@ -171,7 +179,7 @@ def sphere_case(h: float, refine: int, size: float, degree: int, mu: float, quad
     t = np.linspace(0.0, 1.0, 20001)
     weight = (1.0 - t**2) * t
     central_hertz = p0 * np.trapz(np.sqrt(1.0 - (rho * t / a) ** 2) * weight, t) / np.trapz(weight, t)
-    out = {"h": h / 2**refine, "refine": refine, "size": size, "degree": degree, "mu": mu, "quad": qdeg,
+    out = {"h": h / 2**refine, "refine": refine, "size": size, "degree": degree, "mu": mu, "quad": qdeg, "points": points,
            "force": force, "a": a, "p0": p0, "mesh": summary, "seconds": seconds,
            "newton": row["newton_iterations"], "dofs": model.u.function_space.dofmap.index_map.size_global * 3,
            "moment_a": math.sqrt(2.5 * integral(law * r2) / force),
@@ -202,11 +210,11 @@ def sphere(case: dict) -> dict:
 
 def table(rows: list[dict], what: str) -> list[str]:
     out = [f"| mesh | a / h | contact force F | {what} | p₀ | {what} / p₀ − 1 | abs(p − Hertz) / p₀ at the vertices "
-           "r < a/2: max, rms | ∫ p_h ds / F − 1 | run (s) |", "|---|---|---|---|---|---|---|---|---|"]
+           "r < a/2: max, rms | ∫ p_h ds / F − 1 | Newton | run (s) |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(f"| {r['mesh']} | {r['a/h']:.1f} | {r['force']:.5g} | {r['peak']:.5g} | {r['p0']:.5g} | "
                    f"{r['peak'] / r['p0'] - 1:+.2%} | {r['profile']:.2%}, {r['rms']:.2%} | "
-                   f"{r['integral'] / r['force'] - 1:+.1e} | {r['seconds']:.0f} |")
+                   f"{r['integral'] / r['force'] - 1:+.1e} | {r['newton']} | {r['seconds']:.0f} |")
     return out
 
 
@@ -217,7 +225,7 @@ def sphere_table(rows: list[dict]) -> list[str]:
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         tets = int(r["mesh"].split(": ")[1].split()[0])
-        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, quadrature degree {r['quad']}) | "
+        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, {_rule(r)}) | "
                    f"{tets} | {r['dofs']} | "
                    f"{r['newton']} | {r['force']:.5g} | {r['a']:.4g} | {r['a'] / r['h']:.1f} | {r['centre'] - 1:+.2%} | "
                    f"{r['rec_central'] - 1:+.2%} | {r['law_central'] - 1:+.2%} | {r['rec_l2']:.2%}, {r['law_l2']:.1%} | "
@@ -231,16 +239,22 @@ def reference_table(rows: list[dict]) -> list[str]:
            "| mesh | reference | F / F_ref − 1 | the law's mean near the axis / ref − 1 | reported mean / the law's ref − 1 |",
            "|---|---|---|---|---|"]
     for r in rows:
-        same = [q for q in rows if q["size"] == r["size"] and q["mu"] == r["mu"] and q["quad"] == 2 * q["degree"]]
+        same = [q for q in rows if q["size"] == r["size"] and q["mu"] == r["mu"] and q["quad"] == 2 * q["degree"]
+                and q.get("points", "gauss") == "gauss"]
         ref = max(same, key=lambda q: (q["degree"], -q["h"])) if same else r
         if ref is r:
             continue
         law = r["law_central"] * r["p0"] / (ref["law_central"] * ref["p0"]) - 1  # the means themselves, not / p0
         rec = r["rec_central"] * r["p0"] / (ref["law_central"] * ref["p0"]) - 1
-        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, quadrature degree {r['quad']}) | "
+        out.append(f"| P{r['degree']}, h = {r['h']:g} (L = {r['size']:g}, μ = {r['mu']:g}, {_rule(r)}) | "
                    f"P{ref['degree']}, h = {ref['h']:g} | "
                    f"{r['force'] / ref['force'] - 1:+.2%} | {law:+.2%} | {rec:+.2%} |")
     return out
+
+
+def _rule(r: dict) -> str:
+    """The contact rule of a sphere row."""
+    return "the nodes" if r.get("points", "gauss") == "nodes" else f"quadrature degree {r['quad']}"
 
 
 def parse_case(spec: str, h: float, size: float, mu: float, max_it: int) -> dict:
@@ -253,10 +267,12 @@ def parse_case(spec: str, h: float, size: float, mu: float, max_it: int) -> dict
             case["size"] = float(f[1:])
         elif f.startswith("mu"):
             case["mu"] = float(f[2:])
+        elif f in ("gauss", "nodes"):
+            case["points"] = f
         elif f.startswith("q"):
             case["quad"] = int(f[1:])
         else:
-            raise SystemExit(f"--sphere {spec}: {f!r} is not L<size>, mu<mu> or q<degree>")
+            raise SystemExit(f"--sphere {spec}: {f!r} is not L<size>, mu<mu>, q<degree>, gauss or nodes")
     return case
 
 
@@ -270,6 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sphere-h", type=float, default=0.06, help="the sphere's coarsest mesh size at the contact")
     ap.add_argument("--sphere-mu", type=float, default=1e-6, help="the sphere's compliance")
     ap.add_argument("--max-it", type=int, default=200, help="Newton iterations allowed for the sphere (solver.max_it)")
+    ap.add_argument("--points", nargs="*", default=["gauss"], help="solver.contact_points of the line cases")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "hertz_contact.md")
     ap.add_argument("--sphere-out", type=Path, default=ROOT / "benchmarks" / "results" / "hertz_sphere.md")
     ap.add_argument("--sphere-case", help=argparse.SUPPRESS)  # one sphere case (JSON), run by sphere()
@@ -281,12 +298,11 @@ def main(argv: list[str] | None = None) -> int:
     text = [f"# Hertz contact: the reported contact pressure\n\n`{cmd.strip()}`\n",
             f"E = {E}, ν = {NU}, R = {R}, μ = {MU}.\n"]
     lines = []
-    for n in args.line:
-        lines.append(line(n, 1, args.line_delta))
-        print(table(lines, "peak")[-1], flush=True)
-    for n in args.line_p2:
-        lines.append(line(n, 2, args.line_delta))
-        print(table(lines, "peak")[-1], flush=True)
+    for degree, ns in ((1, args.line), (2, args.line_p2)):
+        for n in ns:
+            for points in args.points:
+                lines.append(line(n, degree, args.line_delta, points))
+                print(table(lines, "peak")[-1], flush=True)
     if lines:
         text += [f"## Line contact (plane strain, cylinder at depth δ = {args.line_delta})\n", *table(lines, "peak"), ""]
     if lines:

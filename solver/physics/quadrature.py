@@ -59,10 +59,12 @@ class ContactRule:
         """The ``ds`` metadata of the rule (Gauss: exactly the degree's, as the term always had)."""
         if self.points == "gauss":
             return {"quadrature_degree": self.degree}
-        # FFCx 0.5's "vertex" scheme takes the cell's vertices, not the facet's, for a ds: the rule is given as custom
+        # FFCx 0.5's "vertex" scheme takes the cell's vertices, not the facet's, for a ds: the rule is given as custom,
+        # as tuples (UFL's signature takes str() of the metadata: exact for these few floats, and without its warning
+        # about arrays)
         points, weights = self.facet_quadrature(facet)
         return {"quadrature_rule": "custom", "quadrature_degree": 2 * self.order - 1,
-                "quadrature_points": points, "quadrature_weights": weights}
+                "quadrature_points": tuple(map(tuple, points.tolist())), "quadrature_weights": tuple(weights.tolist())}
 
 
 def contact_rule(rule: int | ContactRule) -> ContactRule:
