@@ -47,6 +47,7 @@ from first_contact import sphere  # noqa: E402
 
 from solver.config import from_dict  # noqa: E402
 from solver.physics.contact import gap_function, penetration  # noqa: E402
+from solver.physics.quadrature import ContactRule, facet_type  # noqa: E402
 from solver.run.model import build_model  # noqa: E402
 from solver.solvers.continuation import RATIOS, STAGE_ITERATIONS, contact_stiffness_ratio  # noqa: E402
 from solver.solvers.damped_newton import line_minimum  # noqa: E402
@@ -74,9 +75,9 @@ class Level:
         self.ksp = ksp
         self.solves, self.trace = 0, trace
         part = self.model.mech.physics.parts[0]
-        geo, degree = self.model.geo, self.model.cfg.solver.contact_quadrature_degree
-        r = penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, degree))
-        ds = geo.ds(geo.tags[part.name], metadata={"quadrature_degree": degree})
+        geo, rule = self.model.geo, ContactRule.of(self.model.cfg)
+        r = penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, rule))
+        ds = geo.ds(geo.tags[part.name], metadata=rule.metadata(facet_type(geo.mesh)))
         self._energy = fem.form(self.contact.scale * ufl.max_value(r, 0.0) ** 2 / (2.0 * part.contact_law.mu) * ds)
 
     def set_scale(self, s: float) -> None:

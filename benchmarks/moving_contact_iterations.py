@@ -13,7 +13,9 @@ this ...), and the median and range of this tree's displacement time over the ba
 (the iteration counts are the same in every round: the switch and the iterations depend on the iterates only).
 With ``--points A B`` this tree runs each scene with ``solver.contact_points`` = A and = B (the contact law at the
 Gauss points or at the nodes), alternated as the trees are, and the ratio is B's time over A's; the rows then also
-carry the contact force and peak pressure at every tenth level and their largest relative difference from A's.
+carry the contact force, peak pressure and contact length at the end and their largest difference over the levels
+from A's (relative to A's largest). ``--set KEY=VALUE`` (repeatable) adds a scene override to this tree's runs
+(e.g. ``--set solver.method=newton_condensed``).
 """
 
 from __future__ import annotations
@@ -32,10 +34,12 @@ P2 = ["discretization.u_degree=2", "discretization.zeta_degree=2", "time.order=2
 SCENES = {"moving_contact_n32": ("configs/moving_contact.toml", 32), "hard_n48": ("configs/hard.toml", 48)}
 
 
-def run(tree: Path, scene: str, n: int, out: Path, points: str | None = None) -> tuple[list[int], float, list[dict]]:
+def run(tree: Path, scene: str, n: int, out: Path, points: str | None = None,
+        extra: tuple[str, ...] = ()) -> tuple[list[int], float, list[dict]]:
     """The Newton iterations of every level of ``scene`` at n by the solver of ``tree`` (``points``: its
-    solver.contact_points), the displacement solves' time (s) over the run, and the time series' rows."""
-    sets = [*P2, f"mesh.nx={n}", f"mesh.ny={n}", f"output.directory='{out}'"]
+    solver.contact_points; ``extra``: more overrides), the displacement solves' time (s) over the run, and the time
+    series' rows."""
+    sets = [*P2, f"mesh.nx={n}", f"mesh.ny={n}", f"output.directory='{out}'", *extra]
     if points is not None:
         sets.append(f"solver.contact_points='{points}'")
     cmd = [sys.executable, "-m", "solver", "run", str(tree / scene)]
@@ -61,6 +65,7 @@ def main() -> int:
     parser.add_argument("--rounds", type=int, default=1, help="runs of each scene, base and this tree alternated")
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "moving_contact_iterations_runs"))
     parser.add_argument("--points", nargs="*", default=[], help="values of solver.contact_points this tree runs")
+    parser.add_argument("--set", action="append", default=[], help="a scene override of this tree's runs, KEY=VALUE")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="moving_contact_"))
     rows = []
@@ -72,13 +77,15 @@ def main() -> int:
         series: dict[str, list[dict]] = {}
         for k in range(args.rounds):
             for tree, src, points in (trees if k % 2 == 0 else trees[::-1]) if args.points else trees:
-                its, seconds, series_rows = run(src, scene, n, work / f"{name}_{tree}_{k}", points)
+                extra = tuple(args.set) if src == ROOT else ()
+                its, seconds, series_rows = run(src, scene, n, work / f"{name}_{tree}_{k}", points, extra)
                 times[tree].append(seconds)
                 if k == 0:
                     series[tree] = series_rows
                     above = " ".join(f"{i}:{j}" for i, j in enumerate(its) if j > 10)
-                    rows.append({"scene": name, "tree": tree, "total": sum(its), "largest": max(its),
-                                 "above_10": above})
+                    rows.append({"scene": name, "tree": tree, "settings": " ".join(extra), "total": sum(its),
+                                 "largest": max(its), "above_10": above,
+                                 "factorizations": sum(int(r["factorizations"]) for r in series_rows)})
                 print(name, tree, k, sum(its), f"{seconds:.3f} s", flush=True)
         for tree, _, _ in trees:
             row = next(r for r in rows if r["scene"] == name and r["tree"] == tree)

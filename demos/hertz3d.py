@@ -42,6 +42,7 @@ from mpi4py import MPI
 
 from solver.config import from_dict
 from solver.physics.contact import compliance, gap_function, penetration
+from solver.physics.quadrature import ContactRule, facet_type
 from solver.run.model import build_model
 from solver.run.stepper import Stepper
 
@@ -94,10 +95,10 @@ row = Stepper(model).step(0)
 # %%
 geo, u = model.geo, model.u
 part = next(b for b in model.cfg.boundaries if b.role == "contact")
-degree = model.mech.contact.jacobian_ufl.integrals()[0].metadata()["quadrature_degree"]
+rule = ContactRule.of(model.cfg)  # the contact term's rule (solver.contact_points, its degree)
 x = ufl.SpatialCoordinate(geo.mesh)
-p = compliance(penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, degree)), part)
-ds = geo.ds(geo.tags[part.name], metadata={"quadrature_degree": degree})
+p = compliance(penetration(u, ufl.FacetNormal(geo.mesh), gap_function(part, geo, rule)), part)
+ds = geo.ds(geo.tags[part.name], metadata=rule.metadata(facet_type(geo.mesh)))
 r2 = x[0] ** 2 + x[1] ** 2
 
 
