@@ -214,7 +214,7 @@ def table(rows: list[dict], what: str) -> list[str]:
     for r in rows:
         out.append(f"| {r['mesh']} | {r['a/h']:.1f} | {r['force']:.5g} | {r['peak']:.5g} | {r['p0']:.5g} | "
                    f"{r['peak'] / r['p0'] - 1:+.2%} | {r['profile']:.2%}, {r['rms']:.2%} | "
-                   f"{r['integral'] / r['force'] - 1:+.1e} | {r['newton']} | {r['seconds']:.0f} |")
+                   f"{r['integral'] / r['force'] - 1:+.1e} | {int(r['newton'])} | {r['seconds']:.0f} |")
     return out
 
 
