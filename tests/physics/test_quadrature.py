@@ -105,3 +105,23 @@ def test_facet_type():
 
     assert facet_type(mesh.create_unit_square(MPI.COMM_SELF, 1, 1)) == basix.CellType.interval
     assert facet_type(mesh.create_unit_cube(MPI.COMM_SELF, 1, 1, 1)) == basix.CellType.triangle
+
+
+@pytest.mark.parametrize("dim, degree", [(2, 2), (3, 1)])
+def test_pressures_of_the_nodal_rule_carry_its_force(comm, dim, degree):
+    """The reported pressure (traces) and the estimator's λ_h are recovered with the nodal rule too: both integrate
+    to the contact force of the nodal term (a Gauss rule anywhere in them would not)."""
+    from solver.physics.estimator import estimator_for
+
+    model = build_model(from_dict(_scene(dim, degree, 4)), comm)
+    model.u.interpolate(lambda x: np.stack([0.01 * x[1]] * (dim - 1) + [-0.02 + 0.03 * x[0] ** 2 + 0.01 * x[1]]))
+    model.u.x.scatter_forward()
+    force = model.mech.diagnostics.contact_force()
+    traces = model.mech.diagnostics.traces
+    traces.update()
+    assert traces.lumped_force() == pytest.approx(force, rel=1e-12)
+    pressure = estimator_for(model).pressure
+    pressure.update()
+    ds = model.geo.ds(model.geo.tags["bottom"], metadata={"quadrature_degree": 2 * degree})
+    total = comm.allreduce(fem.assemble_scalar(fem.form(pressure.pressure * ds)), op=MPI.SUM)
+    assert total == pytest.approx(force, rel=1e-9)  # λ_h by CG to 1e-14 on the boundary mass matrix
