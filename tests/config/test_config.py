@@ -205,6 +205,17 @@ def test_override_syntax():
     assert apply_overrides({}, ["mesh.nx=3"]) == {"mesh": {"nx": 3}}  # the value syntax is TOML's
 
 
+def test_contact_points_round_trip_and_leave_the_default_scene_as_it_was(tmp_path):
+    """"nodes" survives dumps -> load; the default "gauss" is not written, so a default scene's resolved text (and its
+    checkpoint hash) is the one before the key."""
+    default = from_dict({})
+    assert default.solver.contact_points == "gauss" and "contact_points" not in dumps(default)
+    nodes = from_dict({"solver": {"contact_points": "nodes"}})
+    path = tmp_path / "c.toml"
+    path.write_text(dumps(nodes))
+    assert 'contact_points = "nodes"' in path.read_text() and load(path).solver.contact_points == "nodes"
+
+
 def test_new_keys_round_trip_and_defaults(tmp_path):
     """Body force, displacement parts, laws and gap tables survive dumps -> load; gap coordinates default by side."""
     cfg = from_dict({

@@ -23,6 +23,8 @@ def test_scene_hash_ignores_output_settings_only():
     other = from_dict({**SCENE, "material": {"E": 101.0}})
     first = checkpoint.scene_hash(other)
     assert checkpoint.scene_hash(other) == first != checkpoint.scene_hash(cfg)  # the kept hash is the same scene's
+    # the contact's rule defines the solution: a checkpoint of one rule does not restart the other
+    assert checkpoint.scene_hash(from_dict({**SCENE, "solver": {"contact_points": "nodes"}})) != checkpoint.scene_hash(cfg)
 
 
 def test_keys_sort_points_by_coordinates():
