@@ -91,16 +91,18 @@ def main() -> int:
             row = next(r for r in rows if r["scene"] == name and r["tree"] == tree)
             row["time_displacement_median"] = f"{statistics.median(times[tree]):.3f}"
             if len(args.points) > 1:
-                for column in ("contact_force", "peak_pressure", "contact_length"):
-                    row[f"{column}_end"] = series[tree][-1][column]
-                    row[f"{column}_largest_difference"] = f"{largest_difference(series[tree], series[first], column):.3e}"
+                for column in ("contact_force", "peak_pressure", "contact_length"):  # where both runs write it
+                    row[f"{column}_end"] = series[tree][-1].get(column, "")
+                    if column in series[tree][-1] and column in series[first][-1]:
+                        row[f"{column}_largest_difference"] = \
+                            f"{largest_difference(series[tree], series[first], column):.3e}"
             if first != second:
                 ratios = [a / b for a, b in zip(times[second], times[first], strict=True)]
                 row[f"{second}_over_{first}_median"] = f"{statistics.median(ratios):.3f}"
                 row[f"{second}_over_{first}_range"] = f"{min(ratios):.3f}-{max(ratios):.3f}"
             print(row, flush=True)
     with open(f"{args.out}.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, list(rows[-1]))
+        w = csv.DictWriter(f, list(dict.fromkeys(k for r in rows for k in r)))
         w.writeheader()
         w.writerows(rows)
     return 0
