@@ -29,7 +29,7 @@ from dolfinx import fem
 from solver.config import MaterialConfig, OutputConfig
 from solver.errors import OutputError, UsageError
 from solver.io.contact_series import ContactSeries
-from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
+from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, Vector3, XDMFSeries, dolfinx_layout, tensor6
 from solver.laws.memory import pairs
 from solver.physics.material import lame, von_mises_array
 from solver.physics.memory_source import StrainMap, strain_table
@@ -214,6 +214,7 @@ class Outputs:
             return
         self.model = model
         self.rows = DolfinxRows(mesh)
+        self._vector3 = Vector3()  # the displacement's rows padded to 3 components, in an array kept between levels
         self._node_fields = {"displacement": _vertex_values(model.u)}
         if model.damage is not None:
             self._node_fields["damage"] = _vertex_values(model.damage.zeta)
@@ -290,7 +291,7 @@ class Outputs:
         values = {}
         for name in self.names:
             if name == "displacement":
-                values[name] = vector3(self.rows.rows(self._node_fields[name]()))
+                values[name] = self._vector3(self.rows.rows(self._node_fields[name]()))
             elif name == "damage" or name in CONTACT_FIELDS:
                 values[name] = self.rows.rows(self._node_fields[name]())
             else:

@@ -246,6 +246,27 @@ def vector3(rows: np.ndarray) -> np.ndarray:
     return out
 
 
+class Vector3:
+    """:func:`vector3` into an array kept between calls (a writer's level after level): its zero columns are written
+    once, and a level copies the 1-2 components in, without a new (rows, 3) array each time. The result is valid
+    until the next call (:meth:`XDMFSeries.write` is done with its values when it returns)."""
+
+    def __init__(self) -> None:
+        self._out: np.ndarray | None = None
+        self._width = 0
+
+    def __call__(self, rows: np.ndarray) -> np.ndarray:
+        rows = rows.reshape(len(rows), -1) if rows.size else rows.reshape(0, rows.shape[-1] if rows.ndim == 2 else 1)
+        if rows.shape[1] == 3:
+            return rows
+        out = self._out
+        if out is None or out.shape[0] != len(rows) or out.dtype != rows.dtype or self._width != rows.shape[1]:
+            out = self._out = np.zeros((len(rows), 3), dtype=rows.dtype)
+            self._width = rows.shape[1]
+        out[:, : rows.shape[1]] = rows
+        return out
+
+
 def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndarray:
     """Symmetric tensors (rows of dim*dim, row-major) as XX, YY, ZZ, XY, YZ, XZ (ParaView's order; 2-D: YZ, XZ = 0,
     and ZZ = ``zz`` where given (plane strain's sigma_33), else 0).
