@@ -65,8 +65,8 @@ class ProfileWriter:
         on_rank0(self.comm, append)
 
     def _template(self, name: str, rows: np.ndarray) -> tuple[str, int]:
-        """A part's lines with its fixed columns written out, \\0 for the lead (step, t) and %r for each of the others,
-        and the number of fixed columns: a level is one % format, the same text as repr of each value (the fixed
+        """A part's lines with its fixed columns written out, \\0 for the lead (step, t) and %s for each of the others,
+        and the number of fixed columns: a level is one % format of their reprs (:func:`_reprs`; the fixed
         columns' reprs made once). Fixed: s and the point, and the gap once two levels in a row had the same (a gap
         that moves is formatted per level). Made again when they change."""
         fixed = np.ascontiguousarray(rows[:, : HEAD + 1]).tobytes()
@@ -85,8 +85,8 @@ class ProfileWriter:
 
     @staticmethod
     def _lines(name: str, rows: np.ndarray, fixed: int) -> str:
-        """The lines of a part with its first ``fixed`` columns written out (repr), \\0 for the lead and %r for the
-        others."""
+        """The lines of a part with its first ``fixed`` columns written out (repr), \\0 for the lead and %s for the
+        others' reprs."""
         tail = ",%s" * (rows.shape[1] - fixed) + "\n"
         return "".join("\0" + (name + "," + ",".join(map(repr, row))).replace("%", "%%") + tail
                        for row in rows[:, :fixed].tolist())

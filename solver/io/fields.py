@@ -135,7 +135,7 @@ class CellStresses:
         """(von Mises of sigma, of A eps(u)) per cell of ``rows`` in plane stress (2-D, after :meth:`prepare`), from
         the components: the values of :func:`von_mises_array` of :meth:`total` and :meth:`elastic`, the same
         operations on the same numbers, without the d x d tensors. ``out``: the two arrays to fill (else new ones).
-        The operations run in place in scratch arrays kept between levels (a level allocates nothing)."""
+        The operations run in place, in work arrays kept between levels (no temporaries a level)."""
         e = self._strains(rows)
         m = e.shape[1]
         if self._scratch is None or self._scratch.shape[1] != m:
