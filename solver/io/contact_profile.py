@@ -19,6 +19,7 @@ from solver.io.layout import PROFILE_COLUMNS
 from solver.physics.contact_traces import ContactTraces
 
 HEAD = 4  # the columns that are the same at every level: s and the point (x, y, z)
+U_NORMAL, PENETRATION = PROFILE_COLUMNS.index("u_normal") - 3, PROFILE_COLUMNS.index("penetration") - 3  # in a part's rows
 
 
 class ProfileWriter:
@@ -51,7 +52,7 @@ class ProfileWriter:
             text = []
             for name, rows in parts:
                 template, fixed = self._template(name, rows)
-                text.append(template.replace("\0", lead) % tuple(rows[:, fixed:].ravel().tolist()))
+                text.append(template.replace("\0", lead) % _reprs(rows, fixed))
             data = "".join(text).encode()
             try:
                 if os.write(self.fd, data) != len(data):
@@ -64,8 +65,8 @@ class ProfileWriter:
         on_rank0(self.comm, append)
 
     def _template(self, name: str, rows: np.ndarray) -> tuple[str, int]:
-        """A part's lines with its fixed columns written out, \\0 for the lead (step, t) and %r for each of the others,
-        and the number of fixed columns: a level is one % format, the same text as repr of each value (the fixed
+        """A part's lines with its fixed columns written out, \\0 for the lead (step, t) and %s for each of the others,
+        and the number of fixed columns: a level is one % format of their reprs (:func:`_reprs`; the fixed
         columns' reprs made once). Fixed: s and the point, and the gap once two levels in a row had the same (a gap
         that moves is formatted per level). Made again when they change."""
         fixed = np.ascontiguousarray(rows[:, : HEAD + 1]).tobytes()
@@ -84,9 +85,9 @@ class ProfileWriter:
 
     @staticmethod
     def _lines(name: str, rows: np.ndarray, fixed: int) -> str:
-        """The lines of a part with its first ``fixed`` columns written out (repr), \\0 for the lead and %r for the
-        others."""
-        tail = ",%r" * (rows.shape[1] - fixed) + "\n"
+        """The lines of a part with its first ``fixed`` columns written out (repr), \\0 for the lead and %s for the
+        others' reprs."""
+        tail = ",%s" * (rows.shape[1] - fixed) + "\n"
         return "".join("\0" + (name + "," + ",".join(map(repr, row))).replace("%", "%%") + tail
                        for row in rows[:, :fixed].tolist())
 
@@ -94,3 +95,25 @@ class ProfileWriter:
         if self.fd is not None:
             os.close(self.fd)
             self.fd = None
+
+
+def _reprs(rows: np.ndarray, fixed: int) -> tuple[str, ...]:
+    """repr of each value of ``rows[:, fixed:]``, row by row: a penetration with the same bits as its u_ν (no gap,
+    or the lumped mean of a positive part that is u_ν itself: most rows in contact) takes u_ν's string instead of a
+    second repr (the shortest round-trip repr, some 0.5-1 us a value, is most of a level's profile)."""
+    values = rows[:, fixed:]
+    width = values.shape[1]
+    lists = values.T.tolist()
+    pen = PENETRATION - fixed if fixed <= U_NORMAL else -1
+    columns = [None if k == pen else list(map(repr, column)) for k, column in enumerate(lists)]
+    if pen >= 0:
+        un = U_NORMAL - fixed
+        same = values[:, pen].view(np.int64) == values[:, un].view(np.int64)
+        if same.all():
+            columns[pen] = columns[un]
+        else:
+            columns[pen] = [a if s else repr(b) for a, s, b in zip(columns[un], same.tolist(), lists[pen])]
+    flat: list[str] = [""] * (len(values) * width)
+    for k, column in enumerate(columns):
+        flat[k::width] = column
+    return tuple(flat)

@@ -16,7 +16,7 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
-from solver.io.xdmf import FACET_TYPES, DolfinxRows, FieldSpec, Layout, XDMFSeries, vector3
+from solver.io.xdmf import FACET_TYPES, DolfinxRows, FieldSpec, Layout, Vector3, XDMFSeries
 
 NAME = "contact"
 FIELDS = ("contact_pressure", "gap", "penetration", "normal_displacement")
@@ -70,13 +70,14 @@ class ContactSeries:
         layout = facet_layout(geo, tuple(part.name for part in traces.parts), self.on_node)
         specs = [FieldSpec(name, "Node", "Scalar") for name in FIELDS] + [FieldSpec("displacement", "Node", "Vector")]
         self.series = XDMFSeries(directory, layout, specs, precision, keep_until, name=NAME)
+        self._vector3 = Vector3()
         self._u_index: tuple | None = None  # (u's space, its owned Γ_C nodes' entries in u.x.array, components)
 
     def write(self, t: float, left: int | None = None) -> None:
         """Level t (collective); ``left`` as for :meth:`XDMFSeries.write`."""
         values = {name: np.take(getattr(self.traces, ATTRIBUTES[name]).x.array, self.node_dof) for name in FIELDS}
         u: fem.Function = self.displacement()
-        values["displacement"] = vector3(self._displacement_rows(u))
+        values["displacement"] = self._vector3(self._displacement_rows(u))
         self.series.write(t, values, left)
 
     def _displacement_rows(self, u: fem.Function) -> np.ndarray:

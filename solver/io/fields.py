@@ -29,7 +29,7 @@ from dolfinx import fem
 from solver.config import MaterialConfig, OutputConfig
 from solver.errors import OutputError, UsageError
 from solver.io.contact_series import ContactSeries
-from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, XDMFSeries, dolfinx_layout, tensor6, vector3
+from solver.io.xdmf import DolfinxRows, FieldSpec, SeriesError, Vector3, XDMFSeries, dolfinx_layout, tensor6
 from solver.laws.memory import pairs
 from solver.physics.material import lame, von_mises_array
 from solver.physics.memory_source import StrainMap, strain_table
@@ -87,6 +87,7 @@ class CellStresses:
         self._in_order = self._strain_points.shape[1] == 1 and np.array_equal(self._strain_points[:, 0],
                                                                                 np.arange(n_cells))
         self._eps = self._memory = self._memory_zz = None
+        self._scratch: np.ndarray | None = None  # von_mises_plane's work arrays (a block's cells)
 
     def prepare(self) -> None:
         """Read the level: eps(u) at the points (the source's kept array, read only) and the memory tensors.
@@ -129,20 +130,37 @@ class CellStresses:
             return np.take(eps, points[:, 0], axis=1)
         return (eps[:, points] * self.q_weights[:, :, 0]).sum(axis=2)
 
-    def von_mises_plane(self, rows: slice) -> tuple[np.ndarray, np.ndarray]:
+    def von_mises_plane(self, rows: slice, out: tuple[np.ndarray, np.ndarray] | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
         """(von Mises of sigma, of A eps(u)) per cell of ``rows`` in plane stress (2-D, after :meth:`prepare`), from
         the components: the values of :func:`von_mises_array` of :meth:`total` and :meth:`elastic`, the same
-        operations on the same numbers, without the d x d tensors."""
+        operations on the same numbers, without the d x d tensors. ``out``: the two arrays to fill (else new ones).
+        The operations run in place, in work arrays kept between levels (no temporaries a level)."""
         e = self._strains(rows)
-        trace = e[:2].sum(axis=0)
+        m = e.shape[1]
+        if self._scratch is None or self._scratch.shape[1] != m:
+            self._scratch = np.empty((4, m))
+        a, b, c, tmp = self._scratch
+        vm, elastic = (np.empty(m), np.empty(m)) if out is None else out
         two_mu, lam = 2.0 * self.lame_mu, self.lame_lambda
-        a, b, c = two_mu * e[0] + lam * trace, two_mu * e[1] + lam * trace, two_mu * e[2]
-        elastic = np.sqrt(a * a + b * b - a * b + 3 * c * c)
+        np.add(e[0], e[1], out=c)  # the trace e[:2].sum(axis=0): e[0] + e[1]
+        np.multiply(lam, c, out=tmp)
+        np.multiply(two_mu, e[0], out=a)
+        a += tmp
+        np.multiply(two_mu, e[1], out=b)
+        b += tmp
+        np.multiply(two_mu, e[2], out=c)
+        _plane_von_mises(a, b, c, tmp, elastic)
         if self.history is None:
+            if out is not None:
+                vm[...] = elastic
+                return vm, elastic
             return elastic, elastic
-        m = self._cell_average(self._memory, self._strain_points, 4, rows)  # rows of xx, xy, yx, yy
-        a, b, c = a + m[:, 0], b + m[:, 3], c + m[:, 1]
-        return np.sqrt(a * a + b * b - a * b + 3 * c * c), elastic
+        mem = self._cell_average(self._memory, self._strain_points, 4, rows)  # rows of xx, xy, yx, yy
+        a += mem[:, 0]
+        b += mem[:, 3]
+        c += mem[:, 1]
+        return _plane_von_mises(a, b, c, tmp, vm), elastic
 
     def total(self, elastic: np.ndarray, rows: slice | None = None) -> np.ndarray:
         """sigma = A eps(u) + (cell average of M), given A eps(u) of the same cells."""
@@ -196,6 +214,7 @@ class Outputs:
             return
         self.model = model
         self.rows = DolfinxRows(mesh)
+        self._vector3 = Vector3()  # the displacement's rows padded to 3 components, in an array kept between levels
         self._node_fields = {"displacement": _vertex_values(model.u)}
         if model.damage is not None:
             self._node_fields["damage"] = _vertex_values(model.damage.zeta)
@@ -238,10 +257,10 @@ class Outputs:
         plane = d == 2 and not st.plane_strain and not tensors and want & {"von_mises", "von_mises_elastic"}
         for start in range(0, n, self.BLOCK):
             rows = slice(start, min(start + self.BLOCK, n))
-            if plane:  # the von Mises values alone, from the components
-                block = dict(zip(("von_mises", "von_mises_elastic"), st.von_mises_plane(rows)))
-                for name, values in out.items():
-                    values[rows] = block[name]
+            if plane:  # the von Mises values alone, from the components, into the written arrays
+                sigma, elastic = (out[name][rows] if name in out else np.empty(rows.stop - rows.start)
+                                  for name in ("von_mises", "von_mises_elastic"))
+                st.von_mises_plane(rows, (sigma, elastic))
                 continue
             block = {"elastic_stress": st.elastic(rows)}
             if want & {"stress", "von_mises"}:
@@ -272,7 +291,7 @@ class Outputs:
         values = {}
         for name in self.names:
             if name == "displacement":
-                values[name] = vector3(self.rows.rows(self._node_fields[name]()))
+                values[name] = self._vector3(self.rows.rows(self._node_fields[name]()))
             elif name == "damage" or name in CONTACT_FIELDS:
                 values[name] = self.rows.rows(self._node_fields[name]())
             else:
@@ -301,6 +320,20 @@ class Outputs:
                 failure = failure or exc
         if failure is not None and not quiet:
             raise OutputError(str(failure), failure.t) from None
+
+
+def _plane_von_mises(a: np.ndarray, b: np.ndarray, c: np.ndarray, tmp: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """sqrt(a a + b b - a b + 3 c c) into ``out``, the operations of :func:`von_mises_array`'s plane formula in its
+    order (((a a + b b) - a b) + (3 c) c), in place (``tmp`` a work array): the same values to the last bit."""
+    np.multiply(a, a, out=out)
+    np.multiply(b, b, out=tmp)
+    out += tmp
+    np.multiply(a, b, out=tmp)
+    out -= tmp
+    np.multiply(3, c, out=tmp)
+    tmp *= c
+    out += tmp
+    return np.sqrt(out, out=out)
 
 
 def _centroid_strains(u: fem.Function, n_cells: int) -> StrainMap:

@@ -246,6 +246,27 @@ def vector3(rows: np.ndarray) -> np.ndarray:
     return out
 
 
+class Vector3:
+    """:func:`vector3` into an array kept between calls (a writer's level after level): its zero columns are written
+    once, and a level copies the 1-2 components in, without a new (rows, 3) array each time. The result is valid
+    until the next call (:meth:`XDMFSeries.write` is done with its values when it returns)."""
+
+    def __init__(self) -> None:
+        self._out: np.ndarray | None = None
+        self._width = 0
+
+    def __call__(self, rows: np.ndarray) -> np.ndarray:
+        rows = rows.reshape(len(rows), -1) if rows.size else rows.reshape(0, rows.shape[-1] if rows.ndim == 2 else 1)
+        if rows.shape[1] == 3:
+            return rows
+        out = self._out
+        if out is None or out.shape[0] != len(rows) or out.dtype != rows.dtype or self._width != rows.shape[1]:
+            out = self._out = np.zeros((len(rows), 3), dtype=rows.dtype)
+            self._width = rows.shape[1]
+        out[:, : rows.shape[1]] = rows
+        return out
+
+
 def tensor6(rows: np.ndarray, dim: int, zz: np.ndarray | None = None) -> np.ndarray:
     """Symmetric tensors (rows of dim*dim, row-major) as XX, YY, ZZ, XY, YZ, XZ (ParaView's order; 2-D: YZ, XZ = 0,
     and ZZ = ``zz`` where given (plane strain's sigma_33), else 0).
@@ -450,7 +471,7 @@ class _Chunk:
         """A field at a slot: ``values[rows]``, taken straight into its part's buffer (one copy), or into an array
         written at once (a large part)."""
         if self._buf is not None:
-            np.take(values, rows, out=self.plan.views[slot][name], mode="clip")
+            values.take(rows, out=self.plan.views[slot][name], mode="clip")  # the method: no dispatch of np.take
             return
         offset, count = self.plan.where[slot][name]
         if count:
@@ -607,6 +628,7 @@ class XDMFSeries:
         self._templates: dict[int, _Template] = {}  # rank 0: the chunk files' templates, by levels
         self._setup_gather()
         self._local = [layout.local[f.center] for f in self.fields]  # this rank's rows of each field
+        self._expected = [(f, n, n * f.ncomp) for f, n in zip(self.fields, self._local)]  # ... and values
         self._grid_format = self._grid_xml()
         self._collective(lambda: self._open(keep_until))
         # the mesh is in its file now: neither the whole gathered mesh (rank 0) nor this rank's part is kept
@@ -725,11 +747,13 @@ class XDMFSeries:
         if self.closed:
             raise RuntimeError("write() after close()")
         parts = []
-        for f, n in zip(self.fields, self._local):
-            v = np.asarray(values[f.name])
-            if v.size != n * f.ncomp:
+        for f, n, size in self._expected:
+            v = values[f.name]
+            if not isinstance(v, np.ndarray):
+                v = np.asarray(v)
+            if v.size != size:
                 raise ValueError(f"field {f.name}: {v.shape} values for {n} rows of {f.ncomp} components")
-            parts.append(v.astype(self.dtype, copy=False).ravel())
+            parts.append((v if v.dtype == self.dtype else v.astype(self.dtype)).ravel())
         comm = self.comm
         if comm.size > 1:  # one Gatherv of the level: its buffer on each rank, the gathered level on rank 0
             buf = np.concatenate(parts) if len(parts) > 1 else parts[0]

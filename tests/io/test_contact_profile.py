@@ -88,7 +88,7 @@ def test_no_contact_fields_without_contact(comm, shared_tmp):
 def test_profile_lines_are_each_values_repr_whether_the_gap_stays_or_moves(tmp_path):
     """contact.csv's lines are the reprs of the values, whatever the writer keeps formatted (s and the point, and the
     gap once it repeats): a gap that stays, one that moves every level, one that moves and stops, a part whose name
-    holds a %, and a point that moves."""
+    holds a %, a point that moves, and a penetration equal to u_ν on all rows, some or none."""
     from mpi4py import MPI
 
     from solver.io.contact_profile import ProfileWriter
@@ -104,8 +104,19 @@ def test_profile_lines_are_each_values_repr_whether_the_gap_stays_or_moves(tmp_p
         def profile(self):
             g = gaps[self.level]
             other = np.column_stack([head[:, :1], head[:, 1:] + (self.level == 8)])  # the point moves at level 8
-            return [(name, np.column_stack([other if name == "top" else head, g, rng.standard_normal((5, 3))]))
+            return [(name, np.column_stack([other if name == "top" else head, g, self.values()]))
                     for name in ("bottom", "100%", "top")]
+
+        def values(self):
+            """u_ν, penetration, pressure: the penetration u_ν's own value on every row, on some, or on none (the
+            writer formats such a value once), and once -0.0 beside 0.0 (equal numbers, not the same text)."""
+            v = rng.standard_normal((5, 3))
+            if self.level % 3 == 0:
+                v[:, 1] = v[:, 0]
+            elif self.level % 3 == 1:
+                v[::2, 1] = v[::2, 0]
+                v[1, :2] = -0.0, 0.0
+            return v
 
     traces = Traces()
     writer = ProfileWriter(tmp_path / "contact.csv", MPI.COMM_SELF, traces)

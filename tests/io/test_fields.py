@@ -133,3 +133,35 @@ def test_cell_fields_in_blocks_equal_the_whole(comm, shared_tmp, monkeypatch):
     assert np.array_equal(got["von_mises_elastic"], von_mises_array(elastic, 2, zz_el))
     assert len(elastic) > 7 and np.abs(total - elastic).max() > 0
     out.close()
+
+
+@pytest.mark.parametrize("memory,fields", [(True, ("von_mises", "von_mises_elastic")), (True, ("von_mises",)),
+                                           (False, ("von_mises_elastic",)), (False, ("von_mises", "von_mises_elastic"))])
+def test_plane_von_mises_in_place_equal_the_tensor_formula(comm, shared_tmp, monkeypatch, memory, fields):
+    """In plane stress the von Mises values alone are computed from the components, in place, block by block (blocks of
+    7 cells, and the whole at once): bit for bit von_mises_array of the stress tensors, with and without memory, at
+    two levels (the work arrays kept between them)."""
+    cfg = load(ROOT / "configs/example1.toml", ["mesh.nx=6", "mesh.ny=6", "time.k=0.05"])
+    if not memory:
+        cfg = from_dict({**cfg.document, "memory": {"kernel": "none"}}, base=ROOT / "configs")
+    cfg = cfg.replace({"output": {"fields": list(fields)}})
+    model = build_model(cfg, comm)
+    assert (model.history is not None) == memory
+    stepper = Stepper(model)
+    stepper.step(0)
+    outs = [Outputs(model, cfg.material, cfg.output, shared_tmp)]
+    monkeypatch.setattr(Outputs, "BLOCK", 7)
+    outs.append(Outputs(model, cfg.material, cfg.output, shared_tmp))
+    for n in (1, 2):
+        stepper.step(n)
+        cs = CellStresses(model, cfg.material)
+        elastic = cs.elastic()
+        want = {"von_mises": von_mises_array(cs.total(elastic), 2), "von_mises_elastic": von_mises_array(elastic, 2)}
+        assert len(elastic) > 7 and (not memory or np.abs(want["von_mises"] - want["von_mises_elastic"]).max() > 0)
+        for out in outs:
+            got = out.cell_fields()
+            assert set(got) == set(fields)
+            for name in fields:
+                assert np.array_equal(got[name], want[name]), name
+    for out in outs:
+        out.close()

@@ -421,6 +421,22 @@ def test_vector3_of_no_rows():
     assert np.array_equal(vector3(np.ones((2, 2))), [[1, 1, 0], [1, 1, 0]])
 
 
+def test_vector3_kept_array_equals_vector3_level_after_level():
+    """Vector3 (the writers' displacement, padded into an array kept between levels) gives vector3's values at every
+    call: 1 and 2 components, a new row count or type, zero rows, and 3 components passed through."""
+    rng = np.random.default_rng(5)
+    pad = sx.Vector3()
+    for rows in [rng.standard_normal((4, 2)) for _ in range(3)] + [rng.standard_normal((4, 1)), rng.standard_normal(4),
+                                                                  rng.standard_normal((6, 2)),
+                                                                  rng.standard_normal((6, 2)).astype(np.float32),
+                                                                  np.zeros((0, 2)), rng.standard_normal((3, 3))]:
+        got = pad(rows)
+        want = sx.vector3(rows)
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+    first = pad(np.ones((2, 2)))
+    assert pad(np.full((2, 2), 2.0)) is first and np.array_equal(first, [[2, 2, 0], [2, 2, 0]])  # the same array
+
+
 @pytest.mark.serial
 def test_large_levels_written_field_by_field_give_the_same_files(tmp_path, monkeypatch):
     """A level's part of a chunk file is assembled in memory up to STAGE_BYTES and written at once, a larger one field
