@@ -300,6 +300,7 @@ def tolerance_run(ref: Reference, scene, tol: float, log=print) -> dict:
     planning = time.perf_counter() - t0
     cfg = quiet(p.config)  # the scene planned for (without what accuracy.simplify left out) with the plan's choices
     model = build_model(cfg, MPI.COMM_SELF, p.geo)
+    p.warm_start(model)  # as the command line does: level 0's Newton starts at the planner's last t = 0 solution
     sensor = ErrorSensor(model, p)
     sensor_rows = []
     # the sensor (the run's own estimate) is evaluated after the measurement, outside the timed loop
