@@ -511,6 +511,11 @@ def _mesh_label(mesh: dict) -> str:
     return f"n={mesh['nx']}" if mesh.get("nx") == mesh.get("ny") else f"{mesh.get('nx')}x{mesh.get('ny')}"
 
 
+def _ratio(x: float) -> str:
+    """A cost ratio with two significant digits (0.0040, not 0.00: a ratio far below 1/2 still shows its size)."""
+    return f"{x:.2f}" if x >= 0.1 or not np.isfinite(x) else f"{x:.2g}"
+
+
 def verified_table(result: dict) -> list[str]:
     """The tolerance runs against the verified uniform alternative (:func:`verified_uniform`), as markdown lines."""
     lines = ["", "Against the verified uniform alternative (uniform P2, order 2, n and k halved together from the "
@@ -526,7 +531,7 @@ def verified_table(result: dict) -> list[str]:
             last = v["runs"][-1] if v["runs"] else {}
             if not v["verified"]:
                 # the runs made are part of the sequence: its cost is at least theirs, the ratio at most this
-                bound = f"≤ {r['cost'] / v['cost']:.2f}" if v["cost"] > 0 else "—"
+                bound = f"≤ {_ratio(r['cost'] / v['cost'])}" if v["cost"] > 0 else "—"
                 unverified += 1
                 below += r["cost"] <= 0.5 * v["cost"] and r["error"] <= r["tolerance"]
                 lines.append(f"| {name} | {r['tolerance']:g} | {r['error'] / r['tolerance']:.2f} | {r['cost']:.3f} "
@@ -539,7 +544,7 @@ def verified_table(result: dict) -> list[str]:
             lines.append(f"| {name} | {r['tolerance']:g} | {r['error'] / r['tolerance']:.2f} | {r['cost']:.3f} "
                          f"| {len(v['runs'])} | {_mesh_label(last['mesh'])} k={last['k']:g} "
                          f"| {v['error'] / r['tolerance']:.2f} "
-                         f"| {v['cost']:.3f} | {ratio:.2f} |")
+                         f"| {v['cost']:.3f} | {_ratio(ratio)} |")
     lines += ["", f"Within 1/2 of the verified uniform alternative's cost and reliable: {ok} of {count} verified."]
     if unverified:
         lines.append(f"Not verified within {MAX_DOFS} dofs (the sequence needs finer runs; the cost of the runs made "
