@@ -481,7 +481,8 @@ def _write(result: dict, out: Path) -> None:
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
                          "ref_tol": ref_tol, "reference": label,
                          "ref_error_over_tol": own / r["tolerance"] if own is not None else None,
-                         "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
+                         "error_over_tol": r["error"] / r["tolerance"], "levels_judged": r.get("levels"),
+                         "estimate": r["estimate"],
                          "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],
                          "dofs": r["dofs"], "planning_seconds": r["planning_seconds"], "loop_seconds": r["loop_seconds"],
                          "cost": r["cost"], "uniform_degree": b.get("degree"), "uniform_order": b.get("order"),
@@ -559,9 +560,9 @@ def _or_dash(value: float | None, spec: str) -> str:
 
 def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     lines = ["# Tolerance runs against a fine reference (`python -m studies study tolerance`)", "",
-             "| scene | TOL | achieved error | error / TOL | reference's own error / TOL | estimate | chosen | cost (s) "
-             "| cheapest uniform meeting TOL | its cost (s) | cost / uniform | loop / uniform |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| scene | TOL | achieved error | error / TOL | levels judged | reference's own error / TOL | estimate | chosen "
+             "| cost (s) | cheapest uniform meeting TOL | its cost (s) | cost / uniform | loop / uniform |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     swept = _swept(result)
     for r in rows:
         own = r.get("ref_error_over_tol")
@@ -571,7 +572,7 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         ratio, loop, ucost = (_or_dash(r[key], spec) for key, spec in
                               (("cost_ratio", ".2f"), ("loop_ratio", ".2f"), ("uniform_cost", ".3f")))
         lines.append(f"| {r['scene']} | {r['tolerance']:g} | {r['error']:.2e} | {r['error_over_tol']:.2f} "
-                     f"| {_or_dash(own, '.2f')} | {r['estimate']:.2e} "
+                     f"| {_or_dash(r.get('levels_judged'), 'd')} | {_or_dash(own, '.2f')} | {r['estimate']:.2e} "
                      f"| P{r['degree']} o{r['order']} k={r['k']:g}, {r['cells']} cells "
                      f"| {r['cost']:.3f} | {uni} | {ucost} | {ratio} | {loop} |")
     lines += ["", "References (P2, second order, a tolerance run at the reference TOL "
@@ -601,7 +602,10 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         lines += ["", f"Not measured: a reference or a plan that failed (a Newton failure is a failed solve, exit 1, "
                   f"for a user), or a tolerance out of reach within {MAX_DOFS} displacement dofs (exit 2):", ""]
         lines += [f"- {name}" + (f", TOL {tol:g}" if tol is not None else "") + f": {why}" for name, tol, why in unreached]
-    lines += ["", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. " + (
+    lines += ["", "Levels judged: the levels a run shares with its reference (at the same time; where the reference's "
+              "step does not divide the run's, as few as t = 0 and T). "
+              "`scripts/tolerance_all_levels.py` judges every level.",
+              "", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. " + (
               f"Cost within 2x of the cheapest uniform choice: {within} of {n} (planning + loop); the loop alone: "
               f"{loops} of {n} ({none} with no uniform choice in the sweep). " if swept else "") +
               "The cost counts everything after the scene is read; the uniform choice's is its loop.",
