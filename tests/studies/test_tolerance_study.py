@@ -155,3 +155,14 @@ def test_a_small_cost_ratio_keeps_its_digits(tmp_path):
     verified = [line for line in md.splitlines() if line.startswith("| example1 |") and "runs" not in line][-2:]
     assert verified[0].endswith("| 150.000 | 0.004 |"), verified[0]
     assert verified[1].endswith("| ≥ 300.000 | ≤ 0.002 |"), verified[1]
+
+
+def test_the_output_gives_the_levels_judged(tmp_path):
+    """Each row says how many levels were compared with the reference (those both runs have), '—' where not kept."""
+    scene = _scene(1e-4)
+    scene["runs"][0]["levels"] = 3
+    _write({"tolerances": [3e-3], "ref_tol": 1e-4, "scenes": {"example1": scene}}, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    row = next(line for line in md.splitlines() if line.startswith("| example1 | 0.003 |"))
+    assert row.split("|")[5].strip() == "3", row
+    assert "Levels judged: the levels a run shares with its reference" in md
