@@ -300,6 +300,7 @@ def tolerance_run(ref: Reference, scene, tol: float, log=print) -> dict:
     planning = time.perf_counter() - t0
     cfg = quiet(p.config)  # the scene planned for (without what accuracy.simplify left out) with the plan's choices
     model = build_model(cfg, MPI.COMM_SELF, p.geo)
+    p.warm_start(model)  # as the command line does: level 0's Newton starts at the planner's last t = 0 solution
     sensor = ErrorSensor(model, p)
     sensor_rows = []
     # the sensor (the run's own estimate) is evaluated after the measurement, outside the timed loop
@@ -480,7 +481,8 @@ def _write(result: dict, out: Path) -> None:
             rows.append({"scene": name, "tolerance": r["tolerance"], "error": r["error"],
                          "ref_tol": ref_tol, "reference": label,
                          "ref_error_over_tol": own / r["tolerance"] if own is not None else None,
-                         "error_over_tol": r["error"] / r["tolerance"], "estimate": r["estimate"],
+                         "error_over_tol": r["error"] / r["tolerance"], "levels_judged": r.get("levels"),
+                         "estimate": r["estimate"],
                          "degree": r["degree"], "order": r["order"], "k": r["k"], "cells": r["cells"],
                          "dofs": r["dofs"], "planning_seconds": r["planning_seconds"], "loop_seconds": r["loop_seconds"],
                          "cost": r["cost"], "uniform_degree": b.get("degree"), "uniform_order": b.get("order"),
@@ -510,6 +512,11 @@ def _mesh_label(mesh: dict) -> str:
     return f"n={mesh['nx']}" if mesh.get("nx") == mesh.get("ny") else f"{mesh.get('nx')}x{mesh.get('ny')}"
 
 
+def _ratio(x: float) -> str:
+    """A cost ratio with two significant digits (0.0040, not 0.00: a ratio far below 1/2 still shows its size)."""
+    return f"{x:.2f}" if x >= 0.1 or not np.isfinite(x) else f"{x:.2g}"
+
+
 def verified_table(result: dict) -> list[str]:
     """The tolerance runs against the verified uniform alternative (:func:`verified_uniform`), as markdown lines."""
     lines = ["", "Against the verified uniform alternative (uniform P2, order 2, n and k halved together from the "
@@ -525,7 +532,7 @@ def verified_table(result: dict) -> list[str]:
             last = v["runs"][-1] if v["runs"] else {}
             if not v["verified"]:
                 # the runs made are part of the sequence: its cost is at least theirs, the ratio at most this
-                bound = f"≤ {r['cost'] / v['cost']:.2f}" if v["cost"] > 0 else "—"
+                bound = f"≤ {_ratio(r['cost'] / v['cost'])}" if v["cost"] > 0 else "—"
                 unverified += 1
                 below += r["cost"] <= 0.5 * v["cost"] and r["error"] <= r["tolerance"]
                 lines.append(f"| {name} | {r['tolerance']:g} | {r['error'] / r['tolerance']:.2f} | {r['cost']:.3f} "
@@ -538,7 +545,7 @@ def verified_table(result: dict) -> list[str]:
             lines.append(f"| {name} | {r['tolerance']:g} | {r['error'] / r['tolerance']:.2f} | {r['cost']:.3f} "
                          f"| {len(v['runs'])} | {_mesh_label(last['mesh'])} k={last['k']:g} "
                          f"| {v['error'] / r['tolerance']:.2f} "
-                         f"| {v['cost']:.3f} | {ratio:.2f} |")
+                         f"| {v['cost']:.3f} | {_ratio(ratio)} |")
     lines += ["", f"Within 1/2 of the verified uniform alternative's cost and reliable: {ok} of {count} verified."]
     if unverified:
         lines.append(f"Not verified within {MAX_DOFS} dofs (the sequence needs finer runs; the cost of the runs made "
@@ -553,9 +560,9 @@ def _or_dash(value: float | None, spec: str) -> str:
 
 def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
     lines = ["# Tolerance runs against a fine reference (`python -m studies study tolerance`)", "",
-             "| scene | TOL | achieved error | error / TOL | reference's own error / TOL | estimate | chosen | cost (s) "
-             "| cheapest uniform meeting TOL | its cost (s) | cost / uniform | loop / uniform |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| scene | TOL | achieved error | error / TOL | levels judged | reference's own error / TOL | estimate | chosen "
+             "| cost (s) | cheapest uniform meeting TOL | its cost (s) | cost / uniform | loop / uniform |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     swept = _swept(result)
     for r in rows:
         own = r.get("ref_error_over_tol")
@@ -565,7 +572,7 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         ratio, loop, ucost = (_or_dash(r[key], spec) for key, spec in
                               (("cost_ratio", ".2f"), ("loop_ratio", ".2f"), ("uniform_cost", ".3f")))
         lines.append(f"| {r['scene']} | {r['tolerance']:g} | {r['error']:.2e} | {r['error_over_tol']:.2f} "
-                     f"| {_or_dash(own, '.2f')} | {r['estimate']:.2e} "
+                     f"| {_or_dash(r.get('levels_judged'), 'd')} | {_or_dash(own, '.2f')} | {r['estimate']:.2e} "
                      f"| P{r['degree']} o{r['order']} k={r['k']:g}, {r['cells']} cells "
                      f"| {r['cost']:.3f} | {uni} | {ucost} | {ratio} | {loop} |")
     lines += ["", "References (P2, second order, a tolerance run at the reference TOL "
@@ -595,7 +602,10 @@ def markdown(result: dict, rows: list[dict], unreached: list = ()) -> str:
         lines += ["", f"Not measured: a reference or a plan that failed (a Newton failure is a failed solve, exit 1, "
                   f"for a user), or a tolerance out of reach within {MAX_DOFS} displacement dofs (exit 2):", ""]
         lines += [f"- {name}" + (f", TOL {tol:g}" if tol is not None else "") + f": {why}" for name, tol, why in unreached]
-    lines += ["", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. " + (
+    lines += ["", "Levels judged: the levels a run shares with its reference (at the same time; where the reference's "
+              "step does not divide the run's, as few as t = 0 and T). "
+              "`scripts/tolerance_all_levels.py` judges every level.",
+              "", f"Reliable (error <= TOL): {ok} of {n}. Error >= 0.2 TOL: {tight} of {n}. " + (
               f"Cost within 2x of the cheapest uniform choice: {within} of {n} (planning + loop); the loop alone: "
               f"{loops} of {n} ({none} with no uniform choice in the sweep). " if swept else "") +
               "The cost counts everything after the scene is read; the uniform choice's is its loop.",
@@ -634,14 +644,19 @@ def chart(result: dict, out: Path) -> None:
     a.set_xlabel("asked: TOL")
     a.set_ylabel("achieved: error against the reference")
     a.legend(fontsize=7)
-    lim = np.array([1e-3, 1e2]) if swept else np.array([10.0, 1e3])
+    # the reference lines span the points plotted (a factor 2 beyond them)
+    drawn = [v for line in b.get_lines() for xy in (line.get_xdata(), line.get_ydata()) for v in xy if v > 0]
+    lim = (np.array([min(drawn) / 2, max(drawn) * 2]) if drawn else
+           np.array([1e-3, 1e2]) if swept else np.array([10.0, 1e3]))
     b.loglog(lim, lim, "k-", lw=0.8, label="equal cost")
     if swept:
         b.loglog(lim, 2 * lim, "k:", lw=0.8, label="2x")
         b.set_xlabel("cheapest uniform (n, k, degree) meeting TOL: seconds")
         b.set_ylabel("tolerance run (s): filled planning + loop, hollow loop", fontsize=9)
     else:
-        b.loglog(lim, 0.5 * lim, "k:", lw=0.8, label="1/2")
+        b.loglog(lim, 0.5 * lim, "k:", lw=0.8, label="1/2 (the issue's bound)")
+        b.plot([], [], "o", color="0.4", label="filled: verified")
+        b.plot([], [], "o", mfc="none", color="0.4", label="hollow: not verified (x: its runs made)")
         b.set_xlabel("verified uniform alternative: seconds (hollow: not verified, its runs made)", fontsize=9)
         b.set_ylabel("tolerance run (s): planning + loop", fontsize=9)
     b.legend(fontsize=7)

@@ -140,3 +140,29 @@ def test_replaying_a_kept_run_gives_what_running_it_again_measures():
     again = fine.measure(coarse.build())
     assert again["levels"] == 5 and again["error"] > 0
     assert coarse.replay_against(fine) == pytest.approx(again["error"], rel=1e-12)
+
+
+def test_a_small_cost_ratio_keeps_its_digits(tmp_path):
+    """A tolerance run 250x cheaper than its verified uniform alternative reads 0.004, not 0.00 (verified or not)."""
+    scene = _scene(1e-4)
+    run = scene["runs"][0]  # cost 0.6 s
+    run["verified_uniform"] = {"runs": [{"mesh": {"nx": 16, "ny": 16}, "k": 0.01}, {"mesh": {"nx": 32, "ny": 32},
+                                        "k": 0.005}], "cost": 150.0, "error": 1e-4, "verified": True}
+    unverified = dict(run, tolerance=1e-3, verified_uniform=dict(run["verified_uniform"], cost=300.0, verified=False))
+    scene["runs"].append(unverified)
+    _write({"tolerances": [3e-3, 1e-3], "ref_tol": 1e-4, "scenes": {"example1": scene}}, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    verified = [line for line in md.splitlines() if line.startswith("| example1 |") and "runs" not in line][-2:]
+    assert verified[0].endswith("| 150.000 | 0.004 |"), verified[0]
+    assert verified[1].endswith("| ≥ 300.000 | ≤ 0.002 |"), verified[1]
+
+
+def test_the_output_gives_the_levels_judged(tmp_path):
+    """Each row says how many levels were compared with the reference (those both runs have), '—' where not kept."""
+    scene = _scene(1e-4)
+    scene["runs"][0]["levels"] = 3
+    _write({"tolerances": [3e-3], "ref_tol": 1e-4, "scenes": {"example1": scene}}, tmp_path)
+    md = (tmp_path / "tolerance.md").read_text()
+    row = next(line for line in md.splitlines() if line.startswith("| example1 | 0.003 |"))
+    assert row.split("|")[5].strip() == "3", row
+    assert "Levels judged: the levels a run shares with its reference" in md
