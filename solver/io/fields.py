@@ -103,6 +103,11 @@ class CellStresses:
             zz = self.history.out_of_plane
             self._memory_zz = zz.M.x.array if w == 0.0 else zz.M.x.array + w * zz.H()
 
+    def release(self) -> None:
+        """Drop what :meth:`prepare` read: the level's strain (the source's kept array, replaced by the next level's:
+        held here beside it, two strains would be alive at each level's end) and the memory tensors."""
+        self._eps = self._memory = self._memory_zz = self._trace = None
+
     def elastic(self, rows: slice | None = None) -> np.ndarray:
         """A eps(u) per owned cell (``rows``: a block of them, after :meth:`prepare`), rows of d*d (row-major)."""
         if rows is None:
@@ -254,6 +259,15 @@ class Outputs:
             if st.plane_strain:
                 out[name + "_zz"] = np.empty(n)
         st.prepare()
+        try:
+            self._cell_blocks(st, out, tensors, want)
+        finally:
+            st.release()
+        return out
+
+    def _cell_blocks(self, st: CellStresses, out: dict[str, np.ndarray], tensors: list[str], want: set[str]) -> None:
+        """Fill ``out`` block by block (after ``st.prepare()``)."""
+        n, d = st.n_cells, self.d
         plane = d == 2 and not st.plane_strain and not tensors and want & {"von_mises", "von_mises_elastic"}
         for start in range(0, n, self.BLOCK):
             rows = slice(start, min(start + self.BLOCK, n))
@@ -274,7 +288,6 @@ class Outputs:
                     block[scalar] = von_mises_array(block[tensor], d, zz[tensor])
             for name, values in out.items():
                 values[rows] = block[name]
-        return out
 
     def write(self, t: float, left: int | None = None) -> None:
         """Write level t (no-op without a series); a failed write raises OutputError (everything before it stays).

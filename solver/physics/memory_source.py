@@ -281,13 +281,14 @@ class MemorySource:
         never change it."""
         own = u is None
         u = self.u.x.array if own else u
-        for values, eps in self._cache:
-            if _equal(values, u):
-                return eps
+        found = next((eps for values, eps in self._cache if _equal(values, u)), None)  # no loop names left behind
+        if found is not None:
+            return found
+        if self.keep and own:  # the oldest kept strain goes now, before the new one is made: never keep + 1 alive
+            del self._cache[self.keep - 1:]
         eps = (self.strain_operator @ u).reshape(len(self.pairs), -1)
         if self.keep and own:
             self._cache.insert(0, (u.copy(), eps))
-            del self._cache[self.keep:]
         return eps
 
     def __call__(self, out: np.ndarray | None = None, scale: float = 1.0, base: np.ndarray | None = None) -> np.ndarray:

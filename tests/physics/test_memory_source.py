@@ -97,3 +97,43 @@ def test_a_remembered_source_gives_the_same_numbers_and_never_a_stale_one(comm):
     at = plain.zeta_at_points()
     zeta.x.array[:] = keep_values
     assert np.array_equal(kept.zeta_at_points(ez), at)
+
+
+@pytest.mark.parametrize("keep", [1, 2])
+def test_a_new_strain_is_made_after_the_oldest_kept_one_is_let_go(comm, keep):
+    """strain(): of the field's own values, at most ``keep`` strains are held while a new one is made (the oldest
+    is dropped first: at 311,469 dofs in 3-D each is 27 MiB); the strains of every values kept still equal the
+    product, and an array that is not the field's (u_prev of the extrapolation) drops none."""
+    import gc
+    import weakref
+
+    _, u, zeta, rule = _box(comm, 1)
+    src = MemorySource(rule, u, zeta, MemoryIntegrand(60.0, *lame(100.0, 0.3, "plane_strain")), keep=keep)
+    E = src.strain_operator
+    alive_at_product = []
+    made = []
+
+    class Counting:
+        """E's products, counting the source's kept strains still alive when each is made."""
+
+        def __matmul__(self, v):
+            gc.collect()
+            alive_at_product.append(sum(r() is not None for r in made))
+            out = E @ v
+            made.append(weakref.ref(out if out.base is None else out.base))  # the memory's owner
+            return out
+
+    src.strain_operator = Counting()
+    values = [u.x.array.copy() * s for s in (1.0, 1.5, 0.5, 2.0)]
+    for v in values:
+        u.x.array[:] = v
+        eps = src.strain()
+        assert np.array_equal(eps, (E @ v).reshape(eps.shape))
+        del eps
+    assert alive_at_product == [min(i, keep - 1) for i in range(len(values))]
+    other = values[0] * 3.0  # not the field's own values: computed, nothing dropped
+    before = len(src._cache)
+    assert np.array_equal(src.strain(other), (E @ other).reshape(len(src.pairs), -1))
+    assert len(src._cache) == before
+    for v, (kept_u, kept_eps) in zip(values[::-1], src._cache):  # newest first
+        assert np.array_equal(kept_u, v) and np.array_equal(kept_eps, (E @ v).reshape(kept_eps.shape))
