@@ -166,6 +166,7 @@ def test_plane_von_mises_in_place_equal_the_tensor_formula(comm, shared_tmp, mon
     for out in outs:
         out.close()
 
+
 def test_written_cell_fields_do_not_hold_the_levels_strain(comm, shared_tmp):
     """After a level's cell fields the writer holds neither the memory source's kept strain nor the memory tensor: the
     next level's strain would otherwise be made beside this one (27 MiB each at 311,469 dofs in 3-D); the next
