@@ -25,6 +25,9 @@ NOT_INSTALLED = "error: ParaView's pvbatch is not installed (Debian: apt-get ins
 # variables of the caller's MPI launch or Python that must not leak into ParaView's own MPI and Python
 _DROP_PREFIXES = ("OMPI_", "PMIX_", "PMI_", "MPICH_", "HYDRA_", "I_MPI_")
 _DROP = ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")
+# the private Xvfb's options: "-noreset" keeps the server up when its last client leaves; with a reset pvbatch's
+# connection may come during it ("bad X server connection", SIGABRT: docs/developer/design-notes.md)
+XVFB_OPTIONS = ("-screen", "0", "1920x1200x24", "-nolisten", "tcp", "-noreset")
 
 
 def executable() -> str | None:
@@ -81,7 +84,7 @@ def virtual_display(xvfb: str) -> Iterator[str]:
     concurrent renders do not race for a number as ``xvfb-run -a`` can.
     """
     read, write = os.pipe()
-    proc = subprocess.Popen([xvfb, "-displayfd", str(write), "-screen", "0", "1920x1200x24", "-nolisten", "tcp"],
+    proc = subprocess.Popen([xvfb, "-displayfd", str(write), *XVFB_OPTIONS],
                             pass_fds=(write,), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     os.close(write)
@@ -153,9 +156,8 @@ def main(argv: list[str] | None = None) -> int:
             print("error: ParaView failed; without a display Debian's pvbatch needs Xvfb (apt-get install xvfb)",
                   file=sys.stderr)
         return code
-    # Debian's pvbatch under Xvfb has been seen to abort while creating its window (twice in
-    # about 40 renders, not reproducible): a crash is retried once on a fresh virtual display;
-    # the script's own refusals (exit 2: bad directory, field or option, ParaView's Python
+    # a crash (pvbatch has aborted while opening its window) is retried once on a fresh virtual display; the script's
+    # own refusals (exit 2: bad directory, field or option, ParaView's Python
     # modules missing) are not
     code = 1
     for attempt in range(2):

@@ -102,12 +102,12 @@ def test_plot_refuses_an_output_it_cannot_write(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     res = subprocess.run([*plot, "--output", str(blocker / "o")], cwd=ROOT, capture_output=True, text=True)
-    assert res.returncode == 2 and res.stdout == ""
+    assert res.returncode == 2 and res.stdout == "", res.stderr
     assert res.stderr == f"error: --output {blocker / 'o'}: cannot write there (Not a directory)\n"
     before = sorted(p.name for p in out.iterdir())
     with read_only(out) as reason:
         res = subprocess.run(plot, cwd=ROOT, capture_output=True, text=True)
-    assert res.returncode == 2 and res.stdout == ""
+    assert res.returncode == 2 and res.stdout == "", res.stderr
     assert res.stderr == f"error: {out} (give --output elsewhere): cannot write there ({reason})\n"
     assert sorted(p.name for p in out.iterdir()) == before
 
