@@ -40,8 +40,9 @@ def penetration(u, n, gap):
     return ufl.dot(u, n) - gap
 
 
-def _ds(geo: Geometry, part: BoundaryConfig, degree: int | ContactRule):
-    """The part's ``ds`` with the contact rule (a Gauss degree or a :class:`ContactRule`)."""
+def contact_ds(geo: Geometry, part: BoundaryConfig, degree: int | ContactRule):
+    """The part's ``ds`` with the contact rule (a Gauss degree or a :class:`ContactRule`): every integral of the
+    contact term and of what shares its points."""
     return geo.ds(geo.tags[part.name], metadata=contact_rule(degree).metadata(facet_type(geo.mesh)))
 
 
@@ -49,21 +50,21 @@ def residual(u, w, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int
     """j(u, w) = sum over contact parts of int p(u_nu - g) w_nu ds."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        compliance(penetration(u, n, gap_function(p, geo, degree)), p) * ufl.dot(w, n) * _ds(geo, p, degree) for p in parts
+        compliance(penetration(u, n, gap_function(p, geo, degree)), p) * ufl.dot(w, n) * contact_ds(geo, p, degree) for p in parts
     )
 
 
 def force(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule):
     """Total normal contact force int p(u_nu - g) ds (a functional)."""
     n = ufl.FacetNormal(geo.mesh)
-    return sum(compliance(penetration(u, n, gap_function(p, geo, degree)), p) * _ds(geo, p, degree) for p in parts)
+    return sum(compliance(penetration(u, n, gap_function(p, geo, degree)), p) * contact_ds(geo, p, degree) for p in parts)
 
 
 def active_length(u, geo: Geometry, parts: tuple[BoundaryConfig, ...], degree: int | ContactRule):
     """Length (area) of the contact zone where u_nu - g > 0, at the facet quadrature points."""
     n = ufl.FacetNormal(geo.mesh)
     return sum(
-        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo, degree)), 0.0), 1.0, 0.0) * _ds(geo, p, degree)
+        ufl.conditional(ufl.gt(penetration(u, n, gap_function(p, geo, degree)), 0.0), 1.0, 0.0) * contact_ds(geo, p, degree)
         for p in parts
     )
 
@@ -106,9 +107,9 @@ class ContactTerm:
         self._size_form = fem.form(sum(
             constant(w, k) * ufl.conditional(ufl.gt(penetration(u, nrm, gap_function(p, geo, degree)), 0.0),
                                              abs(ufl.dot(u, nrm)) + abs(gap_function(p, geo, degree)), 0.0)
-            * ufl.dot(w, nrm) * _ds(geo, p, degree) for p, k in stiff)) if stiff else None
+            * ufl.dot(w, nrm) * contact_ds(geo, p, degree) for p, k in stiff)) if stiff else None
         self._size: PETSc.Vec | None = None  # made at the first roundoff (a direct solver's exact steps only)
-        self._normal_form = fem.form(sum(constant(w, k) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * _ds(geo, p, degree)
+        self._normal_form = fem.form(sum(constant(w, k) * ufl.dot(w, ufl.FacetNormal(geo.mesh)) * contact_ds(geo, p, degree)
                                          for p, k in stiff)) if stiff else None
 
     def normal_stiffness(self, out: PETSc.Vec) -> None:

@@ -33,9 +33,9 @@ from petsc4py import PETSc
 
 from solver.config import BoundaryConfig
 from solver.mesh.geometry import Geometry
-from solver.physics.contact import compliance, penetration
+from solver.physics.contact import compliance, contact_ds, penetration
 from solver.physics.gap import gap_function
-from solver.physics.quadrature import ContactRule, contact_rule, facet_type
+from solver.physics.quadrature import ContactRule
 
 
 def _assemble(form: fem.Form) -> PETSc.Vec:
@@ -73,10 +73,8 @@ class ContactTraces:
             self.part_dofs[part.name] = dofs[dofs < n_local]
         n = ufl.FacetNormal(mesh)
 
-        metadata = contact_rule(degree).metadata(facet_type(mesh))
-
         def ds(q):
-            return geo.ds(geo.tags[q.name], metadata=metadata)
+            return contact_ds(geo, q, degree)
 
         psi = ufl.TestFunction(S)
         self.mass = _assemble(fem.form(sum(psi * ds(q) for q in parts))).array_r.copy()

@@ -24,10 +24,10 @@ from petsc4py import PETSc
 from solver.config import BoundaryConfig
 from solver.errors import DisplacementSolveError
 from solver.mesh.geometry import Geometry
+from solver.physics.contact import contact_ds
 from solver.physics.contact_points import ContactPoints
 from solver.physics.displacement import DisplacementProblem, SolveInfo
 from solver.physics.operators import assemble_without_diagonal
-from solver.physics.quadrature import contact_rule, facet_type
 from solver.solvers.linear import make_ksp
 from solver.solvers.method import DisplacementMethod
 from solver.solvers.settings import LinearSettings, PointIterationSettings
@@ -135,9 +135,8 @@ class PenaltyDualitySolver(ContactIteration):
         """K + omega N^T W N, assembled as the UFL penalty term on the contact facets."""
         ops, s = self.problem.ops, self.settings
         n = ufl.FacetNormal(self.geo.mesh)
-        rule = contact_rule(s.contact_quadrature_degree).metadata(facet_type(self.geo.mesh))
         a_pen = fem.form(sum((s.penalty_duality_omega / p.contact_law.compliance) * ufl.dot(ops.du, n) * ufl.dot(ops.w, n)
-                             * self.geo.ds(self.geo.tags[p.name], metadata=rule)
+                             * contact_ds(self.geo, p, s.contact_rule)
                              for p in self.parts))
         P = fpetsc.create_matrix(a_pen)
         assemble_without_diagonal(P, a_pen, ops.bcs)

@@ -64,7 +64,7 @@ def build_mechanics(geo: Geometry, u: fem.Function, material: MaterialConfig, bo
                     settings: MethodSettings, history: History | None = None, implicit_term=None,
                     body_force: BodyForceConfig | None = None) -> Mechanics:
     """The scene's displacement physics and the method that solves it, chosen once (methods.build_method)."""
-    physics = build_physics(geo, u, material, boundaries, settings.contact_quadrature_degree, history, implicit_term,
+    physics = build_physics(geo, u, material, boundaries, settings.contact_rule, history, implicit_term,
                             body_force)
     context = MethodContext(physics.problem, settings, geo.comm, geo, physics.parts, physics.points)
     return Mechanics(physics, build_method(context), settings)

@@ -49,7 +49,7 @@ class PointIterationSettings:
     rtol: float = 1e-10
     max_it: int = 25
     penalty_duality_omega: float = 0.5
-    contact_quadrature_degree: int | ContactRule = 1
+    contact_rule: int | ContactRule = 1
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class MethodSettings:
     linear: LinearSettings
     newton: NewtonSettings
     points: PointIterationSettings
-    contact_quadrature_degree: int | ContactRule  # the contact term's rule (ContactRule), or a Gauss degree
+    contact_rule: int | ContactRule  # the contact term's rule (ContactRule), or a Gauss degree
 
     @classmethod
     def from_config(cls, cfg: SolverConfig, linear: str, contact_near_nullspace: bool = True,
@@ -73,5 +73,5 @@ class MethodSettings:
             linear=LinearSettings(linear, cfg.petsc_options),
             newton=NewtonSettings(cfg.rtol, cfg.max_it, cfg.newton_fallback, contact_near_nullspace),
             points=PointIterationSettings(cfg.rtol, cfg.max_it, cfg.penalty_duality_omega, rule),
-            contact_quadrature_degree=rule,
+            contact_rule=rule,
         )
